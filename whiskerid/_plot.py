@@ -1,0 +1,81 @@
+"""Plots saved as PNG (matplotlib, headless). Install with ``pip install "whiskerid[plot]"``."""
+
+from pathlib import Path
+
+import numpy as np
+
+from ._signal import amplitude_spectrum, find_peaks, resample_uniform
+
+
+def _pyplot():
+    try:
+        import matplotlib
+    except ImportError:
+        raise RuntimeError(
+            'plotting needs matplotlib: pip install "whiskerid[plot]"'
+        ) from None
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _spectrum_axes(ax, t, x, *, label: str, n_peaks: int = 3) -> None:
+    _, xu, rate = resample_uniform(t, x)
+    freqs, amps = amplitude_spectrum(xu, rate)
+    ax.semilogy(freqs, np.maximum(amps, 1e-30), lw=0.8)
+    for p in find_peaks(freqs, amps, n=n_peaks, min_separation_hz=2.0):
+        ax.annotate(f"{p.frequency_hz:.1f} Hz", (p.frequency_hz, p.amplitude), fontsize=7,
+                    xytext=(3, 3), textcoords="offset points")  # fmt: skip
+    ax.set_xlabel("frequency (Hz)")
+    ax.set_ylabel(f"|FFT| {label}")
+    ax.set_xlim(0, freqs[-1])
+    top = amps.max() if amps.size else 1.0
+    ax.set_ylim(top * 1e-5, top * 3)
+
+
+def plot_signal_and_spectrum(
+    path: str | Path, t: np.ndarray, x: np.ndarray, *, title: str = "", label: str = ""
+) -> Path:
+    """Save a two-panel PNG: the signal over time and its amplitude spectrum."""
+    plt = _pyplot()
+    fig, (ax_t, ax_f) = plt.subplots(2, 1, figsize=(8, 6), constrained_layout=True)
+    ax_t.plot(t, x, lw=0.7)
+    ax_t.set_xlabel("t (s)")
+    ax_t.set_ylabel(label)
+    _spectrum_axes(ax_f, t, x, label=label)
+    fig.suptitle(title)
+    return _save(fig, path)
+
+
+def plot_modal_analysis(path: str | Path, cases: list[dict]) -> Path:
+    """The paper's modal-analysis figure: one row per (h_b, f_b), signal and spectrum.
+
+    Args:
+        path: PNG file to write.
+        cases: Dicts with ``t``, ``y``, ``hb_m``, ``fb_hz`` (and optional ``model``).
+    """
+    plt = _pyplot()
+    fig, axes = plt.subplots(len(cases), 2, figsize=(10, 2.3 * len(cases)),
+                             constrained_layout=True, squeeze=False)  # fmt: skip
+    for (ax_t, ax_f), case in zip(axes, cases, strict=True):
+        t, y = np.asarray(case["t"]), np.asarray(case["y"])
+        shown = t <= t[0] + 0.1
+        ax_t.plot(t[shown] * 1e3, y[shown] * 1e6, lw=0.8)
+        ax_t.set_xlabel("t (ms)")
+        ax_t.set_ylabel("y_s (µm)")
+        ax_t.set_title(f"{case.get('model', '')} h_b = {case['hb_m'] * 1e3:g} mm, "
+                       f"f_b = {case['fb_hz']:g} Hz", fontsize=9)  # fmt: skip
+        _spectrum_axes(ax_f, t, y, label="y_s")
+        ax_f.set_xlim(0, min(1000.0, ax_f.get_xlim()[1]))
+    return _save(fig, path)
+
+
+def _save(fig, path) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+    return path

@@ -1,0 +1,251 @@
+"""Whisker records: TOML files in ``fits/`` that describe one physical whisker.
+
+A record holds the structure (coil spring or uniform beam: geometry and material), the
+modal damping, an optional tip mass, the sensor (position, Hall gain and offset) and the
+ADS1115 settings. Later stages (calibration, posteriors) add their own tables; tables this
+module does not know are kept verbatim, so loading and saving never loses them.
+
+Example (``fits/paper-whisker.toml``)::
+
+    schema = "whiskerid.whisker/1"
+    name = "paper-whisker"
+
+    [structure]
+    kind = "coil"
+    length_m = 0.06
+    wire_radius_m = 0.0005
+    mean_coil_radius_m = 0.0045
+    n_coils = 13
+    wire_density_kg_m3 = 8050.0
+    shear_modulus_pa = 70000000000.0
+
+    [damping]
+    zeta = 0.04        # or one value per mode: [0.04, 0.03, ...]
+    n_modes = 5
+
+    [sensor]
+    position_m = 0.005
+    ...
+"""
+
+import math
+import tomllib
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import tomli_w
+
+from ._sensor import ADS1115Model, HallSensor
+from ._whisker import CoilSpring, Structure, UniformBeam, Whisker, whisker_from_structure
+
+SCHEMA = "whiskerid.whisker/1"
+
+
+class RecordError(ValueError):
+    """A whisker record that is missing a value, holds a non-physical one, or cannot load."""
+
+
+@dataclass(frozen=True)
+class WhiskerRecord:
+    """Everything known about one whisker (the contents of a ``fits/*.toml`` file).
+
+    Attributes:
+        name: Short identifier.
+        structure: :class:`CoilSpring` or :class:`UniformBeam`.
+        zeta: Modal damping, one value or one per mode.
+        n_modes: Number of modes used by the models.
+        tip_mass_kg: Point mass at the tip (kg).
+        sensor_position_m: Sensor position from the clamp (m).
+        hall: Hall-sensor parameters.
+        adc: ADS1115 settings.
+        description: Free text.
+        extra: Other top-level tables (fits, posteriors, provenance), kept as loaded.
+    """
+
+    name: str
+    structure: Structure
+    zeta: float | tuple[float, ...] = 0.04
+    n_modes: int = 5
+    tip_mass_kg: float = 0.0
+    sensor_position_m: float = 0.005
+    hall: HallSensor = field(default_factory=HallSensor)
+    adc: ADS1115Model = field(default_factory=ADS1115Model)
+    description: str = ""
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self):
+        _check_record(self)
+
+    def whisker(self) -> Whisker:
+        """The :class:`Whisker` pytree the models take."""
+        return whisker_from_structure(
+            self.structure,
+            zeta=np.asarray(self.zeta, dtype=float),
+            n_modes=self.n_modes,
+            tip_mass_kg=self.tip_mass_kg,
+            sensor_x_m=self.sensor_position_m,
+        )
+
+    def to_toml(self) -> str:
+        """TOML text of this record."""
+        return tomli_w.dumps(self.to_dict())
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-data form (what is written to TOML)."""
+        structure = {"kind": self.structure.kind}
+        for f in fields(self.structure):
+            value = getattr(self.structure, f.name)
+            if f.name != "kind" and value is not None:
+                structure[f.name] = value
+        zeta = list(self.zeta) if isinstance(self.zeta, tuple) else self.zeta
+        out: dict[str, Any] = {"schema": SCHEMA, "name": self.name}
+        if self.description:
+            out["description"] = self.description
+        out["structure"] = structure
+        out["damping"] = {"zeta": zeta, "n_modes": self.n_modes}
+        out["tip_mass_kg"] = self.tip_mass_kg
+        out["sensor"] = {
+            "position_m": self.sensor_position_m,
+            "hall_gain_v_per_m": float(self.hall.gain_v_per_m),
+            "hall_offset_v": float(self.hall.offset_v),
+            "hall_quadratic_v_per_m2": float(self.hall.quadratic_v_per_m2),
+        }
+        out["adc"] = {f.name: getattr(self.adc, f.name) for f in fields(self.adc)}
+        # Scalars first: TOML cannot put a key after a table at the same level.
+        out = dict(sorted(out.items(), key=lambda kv: isinstance(kv[1], dict)))
+        for key, value in self.extra.items():
+            out[key] = value
+        return out
+
+    def save(self, path: str | Path) -> Path:
+        """Write the record as TOML (parent folders are created)."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(self.to_toml())
+        return path
+
+    def replace(self, **changes) -> "WhiskerRecord":
+        """A copy with some fields changed (validated again)."""
+        return replace(self, **changes)
+
+
+_KNOWN = {"schema", "name", "description", "structure", "damping", "tip_mass_kg", "sensor", "adc"}
+
+
+def load_record(path: str | Path) -> WhiskerRecord:
+    """Load and validate a whisker record.
+
+    Raises:
+        RecordError: The file is missing or not TOML, or a value is missing or non-physical
+            (the message names the field).
+    """
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise RecordError(f"{path}: no such whisker record") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise RecordError(f"{path}: not a valid TOML file ({err})") from None
+    try:
+        return record_from_dict(data)
+    except RecordError as err:
+        raise RecordError(f"{path}: {err}") from None
+
+
+def record_from_dict(data: dict[str, Any]) -> WhiskerRecord:
+    """Build a :class:`WhiskerRecord` from parsed TOML."""
+    schema = data.get("schema", SCHEMA)
+    if schema != SCHEMA:
+        raise RecordError(f"schema = {schema!r} is not supported (expected {SCHEMA!r})")
+    structure = _structure(_table(data, "structure"))
+    damping = _table(data, "damping")
+    sensor = _table(data, "sensor")
+    zeta = _get(damping, "zeta", "damping")
+    zeta = tuple(float(z) for z in zeta) if isinstance(zeta, list) else zeta
+    n_modes = len(zeta) if isinstance(zeta, tuple) else damping.get("n_modes", 5)
+    hall_keys = {"hall_gain_v_per_m": "gain_v_per_m", "hall_offset_v": "offset_v",
+                 "hall_quadratic_v_per_m2": "quadratic_v_per_m2"}  # fmt: skip
+    try:
+        hall = HallSensor(**{v: sensor[k] for k, v in hall_keys.items() if k in sensor})
+        adc = ADS1115Model(**data.get("adc", {}))
+    except (TypeError, ValueError) as err:
+        raise RecordError(f"[sensor]/[adc]: {err}") from None
+    return WhiskerRecord(
+        name=str(data.get("name", "whisker")),
+        description=str(data.get("description", "")),
+        structure=structure,
+        zeta=zeta,
+        n_modes=n_modes,
+        tip_mass_kg=data.get("tip_mass_kg", 0.0),
+        sensor_position_m=_get(sensor, "position_m", "sensor"),
+        hall=hall,
+        adc=adc,
+        extra={k: v for k, v in data.items() if k not in _KNOWN},
+    )
+
+
+def _table(data: dict, name: str) -> dict:
+    table = data.get(name)
+    if not isinstance(table, dict):
+        raise RecordError(f"the [{name}] table is missing")
+    return table
+
+
+def _get(table: dict, key: str, where: str):
+    if key not in table:
+        raise RecordError(f"{where}.{key} is missing")
+    return table[key]
+
+
+def _structure(table: dict) -> Structure:
+    kind = table.get("kind")
+    classes = {"coil": CoilSpring, "beam": UniformBeam}
+    if kind not in classes:
+        raise RecordError(f"structure.kind = {kind!r} must be 'coil' or 'beam'")
+    cls = classes[kind]
+    names = {f.name for f in fields(cls)} - {"kind"}
+    unknown = set(table) - names - {"kind"}
+    if unknown:
+        raise RecordError(f"structure: unknown field(s) {sorted(unknown)} for kind {kind!r}; "
+                          f"known: {sorted(names)}")  # fmt: skip
+    try:
+        return cls(**{k: v for k, v in table.items() if k != "kind"})
+    except TypeError as err:  # a required field is absent
+        missing = sorted(n for n in names if n not in table)
+        raise RecordError(f"structure: missing field(s) {missing} ({err})") from None
+    except ValueError as err:
+        raise RecordError(f"structure.{err}") from None
+
+
+def _check_record(rec: WhiskerRecord) -> None:
+    zetas = rec.zeta if isinstance(rec.zeta, tuple) else (rec.zeta,)
+    if not all(isinstance(z, int | float) and math.isfinite(z) and 0 <= z < 1 for z in zetas):
+        raise RecordError(f"damping.zeta = {rec.zeta!r} must satisfy 0 <= zeta < 1")
+    if not isinstance(rec.n_modes, int) or not 1 <= rec.n_modes <= 40:
+        raise RecordError(f"damping.n_modes = {rec.n_modes!r} must be an integer from 1 to 40")
+    if not isinstance(rec.tip_mass_kg, int | float) or not 0 <= rec.tip_mass_kg < math.inf:
+        raise RecordError(f"tip_mass_kg = {rec.tip_mass_kg!r} must be zero or positive")
+    x = rec.sensor_position_m
+    if not isinstance(x, int | float) or not 0 <= x <= rec.structure.length_m:
+        raise RecordError(f"sensor.position_m = {x!r} must lie on the beam, between 0 and "
+                          f"structure.length_m = {rec.structure.length_m} m")  # fmt: skip
+
+
+def paper_record() -> WhiskerRecord:
+    """The paper's whisker as a record (NOTES §1); ``fits/paper-whisker.toml`` holds it."""
+    from ._whisker import paper_coil
+
+    return WhiskerRecord(
+        name="paper-whisker",
+        description=(
+            "Coil-spring whisker of Yu et al. (Section III): 60 mm, wire 1 mm, OD/ID 10/8 mm, "
+            "13 coils, steel; Hall sensor 5 mm from the base. Hall gain/offset and ADC settings "
+            "are nominal values, not from the paper."
+        ),
+        structure=paper_coil(),
+        zeta=0.04,
+        n_modes=5,
+        sensor_position_m=0.005,
+    )

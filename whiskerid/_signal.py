@@ -1,0 +1,112 @@
+"""Spectra and spectral peaks of recorded or simulated signals (NumPy; host-side helpers).
+
+Timestamps from a Pi are not uniform (NOTES §4); :func:`resample_uniform` puts a signal on a
+uniform grid by linear interpolation before any FFT.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def resample_uniform(
+    t: np.ndarray, x: np.ndarray, rate_hz: float | None = None
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Linear interpolation of ``x(t)`` onto a uniform grid.
+
+    Args:
+        t: Increasing sample times (s).
+        x: Samples.
+        rate_hz: Grid rate; the median rate of ``t`` by default.
+
+    Returns:
+        ``(t_uniform, x_uniform, rate_hz)``.
+    """
+    t = np.asarray(t, dtype=float)
+    x = np.asarray(x, dtype=float)
+    if rate_hz is None:
+        rate_hz = 1.0 / float(np.median(np.diff(t)))
+    n = int(np.floor((t[-1] - t[0]) * rate_hz)) + 1
+    tu = t[0] + np.arange(n) / rate_hz
+    return tu, np.interp(tu, t, x), rate_hz
+
+
+def amplitude_spectrum(
+    x: np.ndarray, rate_hz: float, *, window: str = "hann"
+) -> tuple[np.ndarray, np.ndarray]:
+    """One-sided amplitude spectrum of a uniformly sampled signal (mean removed).
+
+    A sinusoid of amplitude ``A`` on a bin centre reads ``A``: the window's coherent gain is
+    divided out.
+
+    Returns:
+        ``(frequencies_hz, amplitudes)``.
+    """
+    x = np.asarray(x, dtype=float)
+    x = x - x.mean()
+    w = np.hanning(x.size) if window == "hann" else np.ones(x.size)
+    spec = np.abs(np.fft.rfft(x * w)) * 2.0 / w.sum()
+    return np.fft.rfftfreq(x.size, 1.0 / rate_hz), spec
+
+
+@dataclass(frozen=True)
+class Peak:
+    """A spectral peak: interpolated frequency (Hz) and amplitude."""
+
+    frequency_hz: float
+    amplitude: float
+
+
+def find_peaks(
+    freqs: np.ndarray,
+    amps: np.ndarray,
+    *,
+    n: int = 3,
+    min_separation_hz: float = 0.0,
+    min_relative: float = 1e-3,
+) -> list[Peak]:
+    """The ``n`` largest local maxima, with parabolic sub-bin interpolation (log amplitude).
+
+    Args:
+        freqs: Bin frequencies (Hz), uniform.
+        amps: Amplitudes per bin.
+        n: How many peaks to return at most.
+        min_separation_hz: Peaks closer than this to a larger one are dropped.
+        min_relative: Peaks below this fraction of the largest are dropped.
+
+    Returns:
+        Peaks by decreasing amplitude.
+    """
+    amps = np.asarray(amps, dtype=float)
+    inner = np.arange(1, amps.size - 1)
+    is_max = (amps[inner] > amps[inner - 1]) & (amps[inner] >= amps[inner + 1])
+    idx = inner[is_max]
+    idx = idx[amps[idx] >= min_relative * amps.max()] if idx.size else idx
+    idx = idx[np.argsort(amps[idx])[::-1]]
+    df = freqs[1] - freqs[0]
+    peaks: list[Peak] = []
+    for i in idx:
+        f, a = _interpolate(amps, i)
+        f = freqs[0] + f * df
+        if all(abs(f - p.frequency_hz) >= min_separation_hz for p in peaks):
+            peaks.append(Peak(float(f), float(a)))
+        if len(peaks) == n:
+            break
+    return peaks
+
+
+def _interpolate(amps: np.ndarray, i: int) -> tuple[float, float]:
+    """Vertex of the parabola through the log amplitudes of bins ``i−1, i, i+1``."""
+    y0, y1, y2 = np.log(np.maximum(amps[i - 1 : i + 2], 1e-300))
+    denom = y0 - 2 * y1 + y2
+    shift = 0.0 if denom == 0 else 0.5 * (y0 - y2) / denom
+    return i + shift, float(np.exp(y1 - 0.25 * (y0 - y2) * shift))
+
+
+def dominant_peaks(
+    t: np.ndarray, x: np.ndarray, *, n: int = 3, min_separation_hz: float = 2.0
+) -> list[Peak]:
+    """Largest spectral peaks of a (possibly non-uniformly) sampled signal."""
+    _, xu, rate = resample_uniform(t, x)
+    freqs, amps = amplitude_spectrum(xu, rate)
+    return find_peaks(freqs, amps, n=n, min_separation_hz=min_separation_hz)

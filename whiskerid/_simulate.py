@@ -1,0 +1,208 @@
+"""Simulate what a whisker records: model × excitation × observable, sampled like a Pi.
+
+This is the engine behind ``whiskerid simulate`` (NOTES §7). Models:
+
+* ``paper``: Eq. 1 as printed (sine excitation only);
+* ``steady``: the exact modal model's harmonic steady state (sine only);
+* ``exact``: the exact modal model from rest: sine switched on at ``t = 0``, free decay
+  after a pluck, or an arbitrary sampled base motion.
+
+Observables: ``deflection`` (relative to the base, at the sensor, m), ``acceleration``
+(absolute, at the sensor, m/s²: an accelerometer on the beam), ``voltage`` (Hall sensor
+output, V) and ``adc`` (ADS1115 codes: averaging over the conversion, oscillator error,
+clipping and quantisation). Sample times follow the host's schedule (``rate_hz``) with the
+record's timestamp jitter for ``voltage``/``adc``.
+"""
+
+from dataclasses import dataclass, replace
+from typing import Literal
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._io import Recording
+from ._paper import paper_eq1
+from ._record import WhiskerRecord
+from ._response import (
+    base_motion_response,
+    free_decay,
+    harmonic_from_rest,
+    harmonic_steady_state,
+    observe,
+    pluck,
+)
+
+Model = Literal["paper", "steady", "exact"]
+Excitation = Literal["sine", "decay", "base"]
+SimObservable = Literal["deflection", "acceleration", "voltage", "adc"]
+MODELS = ("paper", "steady", "exact")
+EXCITATIONS = ("sine", "decay", "base")
+SIM_OBSERVABLES = ("deflection", "acceleration", "voltage", "adc")
+UNITS = {"deflection": "m", "acceleration": "m/s^2", "voltage": "V", "adc": "code"}
+
+
+@dataclass(frozen=True)
+class BaseMotion:
+    """A sampled base acceleration (m/s²) at increasing times (s)."""
+
+    t: np.ndarray
+    acc: np.ndarray
+
+
+def _signal_function(
+    record: WhiskerRecord,
+    model: Model,
+    excitation: Excitation,
+    observable: Literal["deflection", "acceleration"],
+    *,
+    fb_hz: float,
+    hb_m: float,
+    tip_deflection_m: float,
+    base: BaseMotion | None,
+    oversample_hz: float,
+):
+    """A vectorised JAX function ``t ↦ deflection or acceleration`` at the sensor."""
+    whisker = record.whisker()
+    if model in ("paper", "steady") and excitation != "sine":
+        raise ValueError(f"model {model!r} is defined for --excitation sine only; "
+                         "use --model exact for decay or base")  # fmt: skip
+    if model == "paper":
+        if observable != "deflection":
+            raise ValueError("model 'paper' gives a displacement only (Eq. 1); use --model "
+                             "steady or exact for accelerations")  # fmt: skip
+        return lambda t: paper_eq1(whisker, t, fb_hz=fb_hz, hb_m=hb_m)
+
+    absolute = observable == "acceleration"
+    if excitation == "sine":
+        form = harmonic_steady_state if model == "steady" else harmonic_from_rest
+        return lambda t: observe(
+            whisker, form(whisker, t, fb_hz=fb_hz, hb_m=hb_m), observable, absolute=absolute
+        )
+    if excitation == "decay":
+        q0 = pluck(whisker, tip_deflection_m)
+        return lambda t: observe(
+            whisker, free_decay(whisker, jnp.maximum(t, 0.0), q0=q0), observable,
+            absolute=absolute,
+        )  # fmt: skip
+    if base is None:
+        raise ValueError("--excitation base needs a base-motion file (--base FILE)")
+    # Solve on a fine uniform grid (the input linearly interpolated), then interpolate.
+    dt = min(float(np.median(np.diff(base.t))), 1.0 / oversample_hz)
+    grid = np.arange(base.t[0], base.t[-1] + 0.5 * dt, dt)
+    acc = np.interp(grid, base.t, base.acc)
+    state = base_motion_response(whisker, jnp.asarray(grid), jnp.asarray(acc))
+    values = observe(whisker, state, observable, absolute=absolute)
+    return lambda t: jnp.interp(t, jnp.asarray(grid), values)
+
+
+def simulate(
+    record: WhiskerRecord,
+    *,
+    model: Model = "exact",
+    excitation: Excitation = "sine",
+    observable: SimObservable = "deflection",
+    fb_hz: float = 100.0,
+    hb_m: float = 1e-4,
+    tip_deflection_m: float = 1e-3,
+    base: BaseMotion | None = None,
+    rate_hz: float = 200.0,
+    duration_s: float = 10.0,
+    noise_db: float | None = None,
+    jitter_s: float | None = None,
+    seed: int = 0,
+) -> Recording:
+    """Simulate a recording of ``observable`` (see the module docstring for the choices).
+
+    Args:
+        record: The whisker (structure, damping, sensor, ADC).
+        model: ``paper``, ``steady`` or ``exact``.
+        excitation: ``sine`` (``fb_hz``, ``hb_m``), ``decay`` (``tip_deflection_m``) or
+            ``base`` (``base``).
+        observable: ``deflection``, ``acceleration``, ``voltage`` or ``adc``.
+        fb_hz: Base excitation frequency (Hz).
+        hb_m: Base excitation amplitude (m).
+        tip_deflection_m: Initial tip deflection of a pluck (m).
+        base: Sampled base acceleration for ``excitation="base"``.
+        rate_hz: Host sampling rate (Hz); the Pi samples at 200 Hz.
+        duration_s: Length of the recording (s).
+        noise_db: Signal-to-noise ratio (dB) of added white noise; none when None.
+        jitter_s: Timestamp jitter (s); the record's ADC value for voltage/adc, 0 otherwise.
+        seed: Seed for jitter and noise.
+
+    Returns:
+        A :class:`Recording` with columns ``t`` and ``observable``, and metadata.
+    """
+    _check_inputs(model, excitation, observable, fb_hz, hb_m, rate_hz, duration_s)
+    rng = np.random.default_rng(seed)
+    physical = "acceleration" if observable == "acceleration" else "deflection"
+    fn = _signal_function(record, model, excitation, physical, fb_hz=fb_hz, hb_m=hb_m,
+                          tip_deflection_m=tip_deflection_m, base=base,
+                          oversample_hz=max(20 * rate_hz, 20_000.0))  # fmt: skip
+    adc = record.adc
+    if jitter_s is None:
+        jitter_s = adc.jitter_s if observable in ("voltage", "adc") else 0.0
+    adc = replace(adc, jitter_s=jitter_s)
+    if observable in ("voltage", "adc"):
+        t = adc.sample_times(rate_hz, duration_s, rng=rng)
+    else:
+        t = np.arange(int(round(duration_s * rate_hz))) / rate_hz
+        if jitter_s > 0:
+            t = t + np.clip(rng.standard_normal(t.size) * jitter_s, -0.45 / rate_hz,
+                            0.45 / rate_hz)  # fmt: skip
+            t = t - min(0.0, t[0])
+    values = _observe(record, adc, fn, t, observable, noise_db, rng)
+    meta = {
+        "rate_hz": f"{rate_hz:g}",
+        "units": UNITS[observable],
+        "whisker": record.name,
+        "model": model,
+        "excitation": excitation,
+    }
+    if excitation == "sine":
+        meta.update(fb_hz=f"{fb_hz:g}", hb_m=f"{hb_m:g}")
+    if excitation == "decay":
+        meta["tip_deflection_m"] = f"{tip_deflection_m:g}"
+    if noise_db is not None:
+        meta["noise_db"] = f"{noise_db:g}"
+    meta["seed"] = str(seed)
+    return Recording(t=t, columns={observable: values}, meta=meta)
+
+
+def _observe(record, adc, fn, t, observable, noise_db, rng) -> np.ndarray:
+    fn = jax.jit(fn)
+    if observable in ("deflection", "acceleration"):
+        clean = np.asarray(fn(jnp.asarray(t)))
+        return clean + _noise(clean, noise_db, rng)
+    hall = record.hall
+    volts_fn = jax.jit(lambda tt: hall.voltage(fn(tt)))
+    if observable == "voltage":
+        clean = np.asarray(volts_fn(jnp.asarray(t)))
+        return clean + _noise(clean, noise_db, rng)
+    averaged = np.asarray(adc.average(volts_fn, jnp.asarray(t)))
+    noisy = averaged + _noise(averaged, noise_db, rng)
+    if adc.noise_v_rms > 0:
+        noisy = noisy + adc.noise_v_rms * rng.standard_normal(noisy.shape)
+    return np.asarray(adc.quantise(noisy)).astype(np.int64)
+
+
+def _noise(clean: np.ndarray, noise_db: float | None, rng: np.random.Generator) -> np.ndarray:
+    """White Gaussian noise with power ``var(clean) / 10^(SNR/10)``."""
+    if noise_db is None:
+        return np.zeros_like(clean)
+    sigma = np.std(clean) / 10 ** (noise_db / 20)
+    return sigma * rng.standard_normal(clean.shape)
+
+
+def _check_inputs(model, excitation, observable, fb_hz, hb_m, rate_hz, duration_s) -> None:
+    for name, value, allowed in (("model", model, MODELS), ("excitation", excitation,
+                                 EXCITATIONS), ("observable", observable, SIM_OBSERVABLES)):  # fmt: skip
+        if value not in allowed:
+            raise ValueError(f"{name} must be one of {', '.join(allowed)}; got {value!r}")
+    for name, value in (("rate_hz", rate_hz), ("duration_s", duration_s), ("fb_hz", fb_hz)):
+        if not np.isfinite(value) or value <= 0:
+            raise ValueError(f"{name} = {value!r} must be a positive number")
+    if not np.isfinite(hb_m) or hb_m < 0:
+        raise ValueError(f"hb_m = {hb_m!r} must be zero or positive")
+    if duration_s * rate_hz < 2:
+        raise ValueError("duration_s * rate_hz must give at least 2 samples")
