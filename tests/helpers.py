@@ -19,7 +19,9 @@ ALU = {"E": 70e9, "rho": 2700.0, "width": 0.05, "thickness": 0.002, "tip_mass": 
 ALU_THEORY_F1 = {0.30: 16.36, 0.50: 6.14}
 
 
-def paper_eq1_numpy(t, x, *, fb, hb, l, EI, rho_a, zeta, D=(1.8751, 4.6941, 7.8548, 10.9955, 14.137)):
+def paper_eq1_numpy(
+    t, x, *, fb, hb, l, EI, rho_a, zeta, D=(1.8751, 4.6941, 7.8548, 10.9955, 14.137)
+):
     """Eq. 1 typed in again from the paper, literally (overflows for long t; use t < 0.5 s).
 
     The printed symbols: a*rho is the line density, E*I the bending stiffness.
@@ -30,20 +32,45 @@ def paper_eq1_numpy(t, x, *, fb, hb, l, EI, rho_a, zeta, D=(1.8751, 4.6941, 7.85
     y = np.zeros_like(t)
     for Di in D:
         k = np.sqrt(E_I / a_rho)
-        A = (2 * a_rho * hb * l**4 * wb**2 * np.exp(-(Di**2) * t * zeta * k / l**2)
-             * np.sin(wb * t) * (np.cos(Di) - 1) * (np.cosh(Di) - 1) * (np.cos(Di) + np.cosh(Di)))
-        B = (np.sinh(Di * x / l) - np.sin(Di * x / l)
-             + (np.cos(Di * x / l) - np.cosh(Di * x / l)) * (np.sin(Di) + np.sinh(Di))
-             / (np.cos(Di) + np.cosh(Di)))
-        C = (zeta * np.sin(Di**2 * t * np.sqrt(1 - zeta**2) * k / l**2)
-             - np.exp(Di**2 * t * zeta * k / l**2) * np.sqrt(1 - zeta**2)
-             + np.cos(Di**2 * np.sqrt(E_I) * t * np.sqrt(1 - zeta**2) / (np.sqrt(a_rho) * l**2))
-             * np.sqrt(1 - zeta**2))
-        Dd = (Di**4 * E_I * np.sqrt(1 - zeta**2)
-              * (3 * np.sinh(Di) * np.cos(Di) ** 2 * np.cosh(Di) - Di * np.cos(Di) ** 2
-                 - 3 * np.sin(Di) * np.cos(Di) * np.cosh(Di) ** 2 + 3 * np.sinh(Di) * np.cos(Di)
-                 + Di * np.cosh(Di) ** 2 - 3 * np.sin(Di) * np.cosh(Di)
-                 + 2 * Di * np.sin(Di) * np.sinh(Di)))
+        A = (
+            2
+            * a_rho
+            * hb
+            * l**4
+            * wb**2
+            * np.exp(-(Di**2) * t * zeta * k / l**2)
+            * np.sin(wb * t)
+            * (np.cos(Di) - 1)
+            * (np.cosh(Di) - 1)
+            * (np.cos(Di) + np.cosh(Di))
+        )
+        B = (
+            np.sinh(Di * x / l)
+            - np.sin(Di * x / l)
+            + (np.cos(Di * x / l) - np.cosh(Di * x / l))
+            * (np.sin(Di) + np.sinh(Di))
+            / (np.cos(Di) + np.cosh(Di))
+        )
+        C = (
+            zeta * np.sin(Di**2 * t * np.sqrt(1 - zeta**2) * k / l**2)
+            - np.exp(Di**2 * t * zeta * k / l**2) * np.sqrt(1 - zeta**2)
+            + np.cos(Di**2 * np.sqrt(E_I) * t * np.sqrt(1 - zeta**2) / (np.sqrt(a_rho) * l**2))
+            * np.sqrt(1 - zeta**2)
+        )
+        Dd = (
+            Di**4
+            * E_I
+            * np.sqrt(1 - zeta**2)
+            * (
+                3 * np.sinh(Di) * np.cos(Di) ** 2 * np.cosh(Di)
+                - Di * np.cos(Di) ** 2
+                - 3 * np.sin(Di) * np.cos(Di) * np.cosh(Di) ** 2
+                + 3 * np.sinh(Di) * np.cos(Di)
+                + Di * np.cosh(Di) ** 2
+                - 3 * np.sin(Di) * np.cosh(Di)
+                + 2 * Di * np.sin(Di) * np.sinh(Di)
+            )
+        )
         y += -(A * B * C) / Dd
     return y
 
@@ -59,10 +86,31 @@ class FEMBeam:
     def __init__(self, *, length, EI, rho_a, zeta, tip_mass=0.0, n_el=40):
         self.length, self.n_el = length, n_el
         h = length / n_el
-        k = EI / h**3 * np.array([[12, 6 * h, -12, 6 * h], [6 * h, 4 * h * h, -6 * h, 2 * h * h],
-                                  [-12, -6 * h, 12, -6 * h], [6 * h, 2 * h * h, -6 * h, 4 * h * h]])
-        m = rho_a * h / 420 * np.array([[156, 22 * h, 54, -13 * h], [22 * h, 4 * h * h, 13 * h, -3 * h * h],
-                                        [54, 13 * h, 156, -22 * h], [-13 * h, -3 * h * h, -22 * h, 4 * h * h]])
+        k = (
+            EI
+            / h**3
+            * np.array(
+                [
+                    [12, 6 * h, -12, 6 * h],
+                    [6 * h, 4 * h * h, -6 * h, 2 * h * h],
+                    [-12, -6 * h, 12, -6 * h],
+                    [6 * h, 2 * h * h, -6 * h, 4 * h * h],
+                ]
+            )
+        )
+        m = (
+            rho_a
+            * h
+            / 420
+            * np.array(
+                [
+                    [156, 22 * h, 54, -13 * h],
+                    [22 * h, 4 * h * h, 13 * h, -3 * h * h],
+                    [54, 13 * h, 156, -22 * h],
+                    [-13 * h, -3 * h * h, -22 * h, 4 * h * h],
+                ]
+            )
+        )
         n = 2 * (n_el + 1)
         K, M = np.zeros((n, n)), np.zeros((n, n))
         for e in range(n_el):
@@ -86,10 +134,16 @@ class FEMBeam:
         h = self.length / self.n_el
         e = min(int(x / h), self.n_el - 1)
         s = (x - e * h) / h
-        N = np.array([1 - 3 * s**2 + 2 * s**3, h * (s - 2 * s**2 + s**3),
-                      3 * s**2 - 2 * s**3, h * (-(s**2) + s**3)])
+        N = np.array(
+            [
+                1 - 3 * s**2 + 2 * s**3,
+                h * (s - 2 * s**2 + s**3),
+                3 * s**2 - 2 * s**3,
+                h * (-(s**2) + s**3),
+            ]
+        )
         row = np.zeros(2 * (self.n_el + 1))
-        row[2 * e: 2 * e + 4] = N
+        row[2 * e : 2 * e + 4] = N
         return row[2:]
 
     def steady_amplitude(self, x, fb, hb):
@@ -105,24 +159,39 @@ class FEMBeam:
         w = np.linalg.solve(self.K, f)
         return w * tip_deflection / w[-2]
 
-    def integrate(self, t_eval, *, w0=None, base_acc=None):
-        """Direct integration (scipy Radau) from w0 at rest, or from rest under base_acc(t)."""
+    def integrate(self, t_eval, *, n_modes, w0=None, base_acc=None):
+        """Direct integration (scipy DOP853) of the FE model reduced to its first n_modes modes.
+
+        Starts from the deflection w0 at rest, or from rest under the base acceleration
+        base_acc(t). Returns nodal deflections and slopes at t_eval, shape (len(t), dofs).
+        """
         from scipy.integrate import solve_ivp
 
-        n = self.K.shape[0]
-        Minv = np.linalg.inv(self.M)
-        A = np.block([[np.zeros((n, n)), np.eye(n)], [-Minv @ self.K, -Minv @ self.C]])
-        y0 = np.zeros(2 * n)
+        w2, phi = scipy.linalg.eigh(self.K, self.M, subset_by_index=[0, n_modes - 1])
+        phi = phi / np.sqrt(np.einsum("ij,jk,ki->i", phi.T, self.M, phi))  # mass-normalised
+        omega = np.sqrt(w2)
+        c = phi.T @ self.C @ phi
+        force = phi.T @ self.M @ self.r
+        q0 = np.zeros(2 * n_modes)
         if w0 is not None:
-            y0[:n] = w0
+            q0[:n_modes] = phi.T @ self.M @ w0
 
         def rhs(t, y):
-            dy = A @ y
+            q, v = y[:n_modes], y[n_modes:]
+            a = -(omega**2) * q - c @ v
             if base_acc is not None:
-                dy[n:] -= self.r * base_acc(t)
-            return dy
+                a = a - force * base_acc(t)
+            return np.concatenate([v, a])
 
-        sol = solve_ivp(rhs, (t_eval[0], t_eval[-1]), y0, t_eval=t_eval, method="Radau",
-                        jac=A, rtol=1e-10, atol=1e-14, max_step=2e-4)
+        sol = solve_ivp(
+            rhs,
+            (t_eval[0], t_eval[-1]),
+            q0,
+            t_eval=t_eval,
+            method="DOP853",
+            rtol=1e-10,
+            atol=1e-16,
+            max_step=float(np.min(np.diff(t_eval))),
+        )
         assert sol.success, sol.message
-        return sol.y[:n].T
+        return sol.y[:n_modes].T @ phi.T

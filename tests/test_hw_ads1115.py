@@ -6,7 +6,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 import whiskerid.hw as hw
 from whiskerid.hw import (
     ADS1115,
@@ -138,7 +137,7 @@ def test_bad_config_values_name_the_field_and_choices(kwargs, needle):
 
 @pytest.mark.parametrize("word", [-1, 0x10000, 1.5, "0x8583", True])
 def test_decode_config_rejects_non_16_bit_words(word):
-    with pytest.raises(ValueError, match="0..0xFFFF"):
+    with pytest.raises(ValueError, match=r"0\.\.0xFFFF"):
         decode_config(word)
 
 
@@ -151,9 +150,16 @@ def test_config_normalises_fsr_to_table_value():
 
 @pytest.mark.parametrize(
     ("data", "code"),
-    [([0x7F, 0xFF], 32767), ([0x80, 0x00], -32768), ([0xFF, 0xFF], -1), ([0x00, 0x01], 1),
-     ([0x00, 0x00], 0), ([0x12, 0x34], 0x1234), ([0xFE, 0xDC], 0xFEDC - 0x10000)],
-)  # fmt: skip
+    [
+        ([0x7F, 0xFF], 32767),
+        ([0x80, 0x00], -32768),
+        ([0xFF, 0xFF], -1),
+        ([0x00, 0x01], 1),
+        ([0x00, 0x00], 0),
+        ([0x12, 0x34], 0x1234),
+        ([0xFE, 0xDC], 0xFEDC - 0x10000),
+    ],
+)
 def test_conversion_register_is_big_endian_twos_complement(data, code):
     assert decode_conversion(data) == code
 
@@ -234,8 +240,12 @@ def test_ready_pin_mode_programs_thresholds_and_does_not_poll_config(clock):
     assert drv.read_single() == -4000
     assert drv.read_single() == -4000
     # Hi_thresh = 0x8000, Lo_thresh = 0x0000 once; config with COMP_QUE = 00 (not 11).
-    assert list(emu.writes) == [(3, b"\x80\x00"), (2, b"\x00\x00"), (1, b"\xc3\xc0"),
-                                (1, b"\xc3\xc0")]  # fmt: skip
+    assert list(emu.writes) == [
+        (3, b"\x80\x00"),
+        (2, b"\x00\x00"),
+        (1, b"\xc3\xc0"),
+        (1, b"\xc3\xc0"),
+    ]
     assert [r for r, _ in emu.reads] == [0, 0]
 
 
@@ -314,7 +324,7 @@ def test_driver_rejects_bad_arguments(clock):
         ADS1115(emu, 0x80)
     with pytest.raises(ValueError, match="retries"):
         ADS1115(emu, retries=-1)
-    with pytest.raises(ValueError, match="0..0xFFFF"):
+    with pytest.raises(ValueError, match=r"0\.\.0xFFFF"):
         ADS1115(emu).write_register(1, 0x10000)
 
 

@@ -4,7 +4,6 @@ import math
 
 import numpy as np
 import pytest
-
 from whiskerid.hw import (
     Config,
     EmulatedADS1115,
@@ -143,9 +142,17 @@ def test_conversion_averages_input_first_order_sinc(clock, freq_hz, clock_error)
 
 @pytest.mark.parametrize(
     ("volts", "raw"),
-    [(3.0, b"\x7f\xff"), (2.048, b"\x7f\xff"), (-3.0, b"\x80\x00"), (-2.048, b"\x80\x00"),
-     (-6.25e-5, b"\xff\xff"), (6.25e-5, b"\x00\x01"), (0.0, b"\x00\x00"), (1.0, b"\x3e\x80")],
-)  # fmt: skip
+    [
+        (3.0, b"\x7f\xff"),
+        (2.048, b"\x7f\xff"),
+        (-3.0, b"\x80\x00"),
+        (-2.048, b"\x80\x00"),
+        (-6.25e-5, b"\xff\xff"),
+        (6.25e-5, b"\x00\x01"),
+        (0.0, b"\x00\x00"),
+        (1.0, b"\x3e\x80"),
+    ],
+)
 def test_pga_clipping_and_twos_complement_storage(clock, volts, raw):
     emu = make(clock, lambda t: volts)
     convert_once(emu, clock, Config(mux="AIN0_GND", fsr_v=2.048))
@@ -154,9 +161,17 @@ def test_pga_clipping_and_twos_complement_storage(clock, volts, raw):
 
 @pytest.mark.parametrize(
     ("mux", "volts"),
-    [("AIN0_AIN1", -0.1), ("AIN0_AIN3", -0.3), ("AIN1_AIN3", -0.2), ("AIN2_AIN3", -0.1),
-     ("AIN0_GND", 0.1), ("AIN1_GND", 0.2), ("AIN2_GND", 0.3), ("AIN3_GND", 0.4)],
-)  # fmt: skip
+    [
+        ("AIN0_AIN1", -0.1),
+        ("AIN0_AIN3", -0.3),
+        ("AIN1_AIN3", -0.2),
+        ("AIN2_AIN3", -0.1),
+        ("AIN0_GND", 0.1),
+        ("AIN1_GND", 0.2),
+        ("AIN2_GND", 0.3),
+        ("AIN3_GND", 0.4),
+    ],
+)
 def test_mux_selects_inputs(clock, mux, volts):
     emu = make(clock, [lambda t: 0.1, lambda t: 0.2, lambda t: 0.3, lambda t: 0.4])
     code = convert_once(emu, clock, Config(mux=mux, fsr_v=0.512))
@@ -221,8 +236,9 @@ def test_rdy_continuous_pulses_8us_per_conversion(clock):
     assert pulses == 5
 
 
-@pytest.mark.parametrize(("hi", "lo", "queue"), [(0x7FFF, 0x8000, 1), (0x8000, 0x0000, None),
-                                                 (0x8000, 0x8000, 1)])  # fmt: skip
+@pytest.mark.parametrize(
+    ("hi", "lo", "queue"), [(0x7FFF, 0x8000, 1), (0x8000, 0x0000, None), (0x8000, 0x8000, 1)]
+)
 def test_rdy_needs_thresholds_and_comparator_enabled(clock, hi, lo, queue):
     emu = make(clock)
     emu.write_i2c_block_data(ADDR, 3, [hi >> 8, hi & 0xFF])

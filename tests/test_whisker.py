@@ -31,12 +31,18 @@ def test_paper_natural_frequencies_within_0p1_percent():
 
 
 def test_uniform_beam_sections():
-    rect = wi.UniformBeam(length_m=0.3, youngs_modulus_pa=70e9, density_kg_m3=2700,
-                          width_m=0.05, thickness_m=0.002)
+    rect = wi.UniformBeam(
+        length_m=0.3, youngs_modulus_pa=70e9, density_kg_m3=2700, width_m=0.05, thickness_m=0.002
+    )
     assert rect.EI == pytest.approx(70e9 * 0.05 * 0.002**3 / 12)
     assert rect.rho_a == pytest.approx(2700 * 1e-4)
-    circ = wi.UniformBeam(length_m=0.1, youngs_modulus_pa=200e9, density_kg_m3=7800,
-                          section="circular", diameter_m=0.001)
+    circ = wi.UniformBeam(
+        length_m=0.1,
+        youngs_modulus_pa=200e9,
+        density_kg_m3=7800,
+        section="circular",
+        diameter_m=0.001,
+    )
     assert circ.EI == pytest.approx(200e9 * math.pi * 1e-12 / 64)
     # Analytic f_1 of a uniform cantilever: 1.8751^2/(2 pi l^2) sqrt(EI/rho A).
     w = wi.whisker_from_structure(circ, sensor_x_m=0.01)
@@ -55,12 +61,21 @@ def test_whisker_is_a_pytree_that_jits_and_vmaps():
 
 @pytest.mark.parametrize(
     ("field", "value", "message"),
-    [("length_m", -0.06, "length_m"), ("zeta", jnp.array([1.0]), "zeta"),
-     ("sensor_x_m", 0.07, "sensor_x_m"), ("EI", 0.0, "EI")],
+    [
+        ("length_m", -0.06, "length_m"),
+        ("zeta", jnp.array([1.0]), "zeta"),
+        ("sensor_x_m", 0.07, "sensor_x_m"),
+        ("EI", 0.0, "EI"),
+    ],
 )
 def test_whisker_refuses_non_physical_values(field, value, message):
-    kwargs = {"length_m": 0.06, "EI": 1e-3, "rho_a": 0.04, "zeta": jnp.array([0.04]),
-              "sensor_x_m": 0.005}
+    kwargs = {
+        "length_m": 0.06,
+        "EI": 1e-3,
+        "rho_a": 0.04,
+        "zeta": jnp.array([0.04]),
+        "sensor_x_m": 0.005,
+    }
     kwargs[field] = value
     with pytest.raises(ValueError, match=message):
         wi.Whisker(**kwargs)
@@ -77,8 +92,12 @@ def test_shipped_paper_record_matches_code():
 
 
 def test_record_round_trip_keeps_unknown_tables(tmp_path):
-    rec = wi.paper_record().replace(extra={"fit": {"status": "ok", "zeta": {"value": 0.03}}},
-                                    zeta=(0.04, 0.03, 0.02), n_modes=3, tip_mass_kg=0.001)
+    rec = wi.paper_record().replace(
+        extra={"fit": {"status": "ok", "zeta": {"value": 0.03}}},
+        zeta=(0.04, 0.03, 0.02),
+        n_modes=3,
+        tip_mass_kg=0.001,
+    )
     path = rec.save(tmp_path / "sub" / "w.toml")
     back = wi.load_record(path)
     assert back == rec

@@ -26,9 +26,17 @@ DATA_RATE_SPS = MappingProxyType(
 
 #: PGA field (bits 11:9) -> full-scale range in volts (110 and 111 both mean +-0.256 V).
 PGA_FSR_V = MappingProxyType(
-    {0b000: 6.144, 0b001: 4.096, 0b010: 2.048, 0b011: 1.024, 0b100: 0.512, 0b101: 0.256,
-     0b110: 0.256, 0b111: 0.256}
-)  # fmt: skip
+    {
+        0b000: 6.144,
+        0b001: 4.096,
+        0b010: 2.048,
+        0b011: 1.024,
+        0b100: 0.512,
+        0b101: 0.256,
+        0b110: 0.256,
+        0b111: 0.256,
+    }
+)
 
 #: Valid data rates, ascending.
 DATA_RATES_SPS = tuple(sorted(DATA_RATE_SPS.values()))

@@ -55,19 +55,31 @@ def _add_simulate(sub) -> None:
     p.add_argument("--excitation", choices=EXCITATIONS, default="sine")
     p.add_argument("--fb", type=float, default=100.0, help="base excitation frequency (Hz)")
     p.add_argument("--hb", type=float, default=1e-4, help="base excitation amplitude (m)")
-    p.add_argument("--tip-deflection", type=float, default=1e-3,
-                   help="initial tip deflection of a pluck, for --excitation decay (m)")
-    p.add_argument("--base", type=Path,
-                   help="base motion for --excitation base: a recording (CSV/NPZ/NPY) with "
-                        "time and base acceleration (m/s^2)")
-    p.add_argument("--base-col", help="column of --base holding the acceleration "
-                                      "(the first signal column by default)")
+    p.add_argument(
+        "--tip-deflection",
+        type=float,
+        default=1e-3,
+        help="initial tip deflection of a pluck, for --excitation decay (m)",
+    )
+    p.add_argument(
+        "--base",
+        type=Path,
+        help="base motion for --excitation base: a recording (CSV/NPZ/NPY) with "
+        "time and base acceleration (m/s^2)",
+    )
+    p.add_argument(
+        "--base-col",
+        help="column of --base holding the acceleration (the first signal column by default)",
+    )
     p.add_argument("--rate", type=float, default=200.0, help="sampling rate (Hz)")
     p.add_argument("--duration", type=float, default=10.0, help="length (s)")
     p.add_argument("--observable", choices=SIM_OBSERVABLES, default="deflection")
     p.add_argument("--noise-db", type=float, help="add white noise at this SNR (dB)")
-    p.add_argument("--jitter", type=float,
-                   help="timestamp jitter (s); the record's ADC value for voltage/adc, else 0")
+    p.add_argument(
+        "--jitter",
+        type=float,
+        help="timestamp jitter (s); the record's ADC value for voltage/adc, else 0",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed for noise and jitter")
     p.add_argument("--out", type=Path, required=True, help="CSV file to write")
     p.add_argument("--plot", type=Path, help="also save signal and spectrum as this PNG")
@@ -92,11 +104,20 @@ def _cmd_simulate(args) -> dict:
         check_samples(rec.t, acc, where=str(args.base))
         base = BaseMotion(t=rec.t, acc=acc)
     sim = simulate(
-        record, model=args.model, excitation=args.excitation, observable=args.observable,
-        fb_hz=args.fb, hb_m=args.hb, tip_deflection_m=args.tip_deflection, base=base,
-        rate_hz=args.rate, duration_s=args.duration, noise_db=args.noise_db,
-        jitter_s=args.jitter, seed=args.seed,
-    )  # fmt: skip
+        record,
+        model=args.model,
+        excitation=args.excitation,
+        observable=args.observable,
+        fb_hz=args.fb,
+        hb_m=args.hb,
+        tip_deflection_m=args.tip_deflection,
+        base=base,
+        rate_hz=args.rate,
+        duration_s=args.duration,
+        noise_db=args.noise_db,
+        jitter_s=args.jitter,
+        seed=args.seed,
+    )
     write_csv(args.out, sim)
     _say(f"wrote {args.out} ({sim.t.size} samples of {args.observable})")
     x = sim.signal()
@@ -113,9 +134,12 @@ def _cmd_simulate(args) -> dict:
         from ._plot import plot_signal_and_spectrum
 
         plot_signal_and_spectrum(
-            args.plot, sim.t, x, label=f"{args.observable} ({UNITS[args.observable]})",
+            args.plot,
+            sim.t,
+            x,
+            label=f"{args.observable} ({UNITS[args.observable]})",
             title=f"{record.name}: {args.model} model, {args.excitation} excitation",
-        )  # fmt: skip
+        )
         summary["plot"] = str(args.plot)
         _say(f"wrote {args.plot}")
     return summary
@@ -186,8 +210,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"whiskerid {args.command}: interrupted", file=sys.stderr)
         return 130
     if getattr(args, "json", False):
-        result = {"command": args.command, **result,
-                  "elapsed_s": round(time.perf_counter() - start, 3)}  # fmt: skip
+        result = {
+            "command": args.command,
+            **result,
+            "elapsed_s": round(time.perf_counter() - start, 3),
+        }
         print(json.dumps(result, indent=2))
     return 0
 

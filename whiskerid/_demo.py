@@ -31,8 +31,10 @@ def run_demo(out: Path, *, plots: bool = True, say=print) -> dict:
     whisker = record.whisker()
     coil = record.structure
     f_n = [float(f) for f in whisker.natural_frequencies_hz]
-    say(f"[1/3] {record.name}: EI = {coil.EI:.4g} N m^2, C = {coil.coil_factor:.4g}, "
-        f"rho*a = {coil.rho_a:.4g} kg/m")  # fmt: skip
+    say(
+        f"[1/3] {record.name}: EI = {coil.EI:.4g} N m^2, C = {coil.coil_factor:.4g}, "
+        f"rho*a = {coil.rho_a:.4g} kg/m"
+    )
     say("      natural frequencies (Hz): " + ", ".join(f"{f:.1f}" for f in f_n))
 
     say("[2/3] modal analysis, 1 s at 20 kHz, sensor at x_s = 5 mm (peaks in Hz)")
@@ -49,8 +51,10 @@ def run_demo(out: Path, *, plots: bool = True, say=print) -> dict:
             row[name] = {"peaks_hz": peaks, "max_abs_m": float(np.abs(y).max())}
             cases[name].append({"t": t, "y": y, "hb_m": hb, "fb_hz": fb, "model": name})
         modal.append(row)
-        say(f"      h_b = {hb * 1e3:.1f} mm, f_b = {fb:.0f} Hz: paper Eq. 1 {row['paper']['peaks_hz']}"
-            f", exact steady state {row['exact']['peaks_hz']}")  # fmt: skip
+        say(
+            f"      h_b = {hb * 1e3:.1f} mm, f_b = {fb:.0f} Hz: "
+            f"paper Eq. 1 {row['paper']['peaks_hz']}, exact steady state {row['exact']['peaks_hz']}"
+        )
 
     say("[3/3] what the Pi records: Hall sensor + ADS1115 (475 SPS) polled at 200 Hz, 5 s")
     recordings = {}
@@ -58,18 +62,26 @@ def run_demo(out: Path, *, plots: bool = True, say=print) -> dict:
         ("sine30hz", {"excitation": "sine", "fb_hz": 30.0, "hb_m": 2e-4}),
         ("pluck", {"excitation": "decay", "tip_deflection_m": 2e-3}),
     ):
-        sim = simulate(record, model="exact", observable="adc", rate_hz=200.0, duration_s=5.0,
-                       seed=1, **kwargs)  # fmt: skip
+        sim = simulate(
+            record, model="exact", observable="adc", rate_hz=200.0, duration_s=5.0, seed=1, **kwargs
+        )
         path = write_csv(out / f"{label}_adc.csv", sim)
         peaks = [round(p.frequency_hz, 2) for p in dominant_peaks(sim.t, sim.signal(), n=2)]
         recordings[label] = {"csv": str(path), "peaks_hz": peaks}
-        say(f"      {label}: {path} peaks {peaks} Hz (f_1 = {f_n[0]:.1f} Hz; f_2 = {f_n[1]:.1f} "
-            f"Hz folds to {abs(f_n[1] - 200 * round(f_n[1] / 200)):.1f} Hz at 200 Hz)")  # fmt: skip
+        say(
+            f"      {label}: {path} peaks {peaks} Hz (f_1 = {f_n[0]:.1f} Hz; f_2 = {f_n[1]:.1f} "
+            f"Hz folds to {abs(f_n[1] - 200 * round(f_n[1] / 200)):.1f} Hz at 200 Hz)"
+        )
         if plots:
             from ._plot import plot_signal_and_spectrum
 
-            png = plot_signal_and_spectrum(out / f"{label}_adc.png", sim.t, sim.signal(),
-                                           label="ADS1115 code", title=f"{record.name}: {label}")  # fmt: skip
+            png = plot_signal_and_spectrum(
+                out / f"{label}_adc.png",
+                sim.t,
+                sim.signal(),
+                label="ADS1115 code",
+                title=f"{record.name}: {label}",
+            )
             recordings[label]["png"] = str(png)
 
     summary = {

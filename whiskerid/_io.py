@@ -89,8 +89,9 @@ def read_recording(path: str | Path, *, time_col: str = "t") -> Recording:
     readers = {".csv": _read_csv, ".npz": _read_npz, ".npy": _read_npy}
     reader = readers.get(path.suffix.lower())
     if reader is None:
-        raise RecordingError(f"{path}: unknown recording format {path.suffix!r}; use .csv, "
-                             ".npz or .npy")  # fmt: skip
+        raise RecordingError(
+            f"{path}: unknown recording format {path.suffix!r}; use .csv, .npz or .npy"
+        )
     rec = reader(path, time_col)
     rec.source = str(path)
     return rec
@@ -135,8 +136,9 @@ def _read_npz(path: Path, time_col: str) -> Recording:
 def _read_npy(path: Path, time_col: str) -> Recording:
     arr = np.load(path, allow_pickle=False)
     if arr.ndim != 2 or 2 not in arr.shape:
-        raise RecordingError(f"{path}: expected a (2, N) array of time and signal, got "
-                             f"shape {arr.shape}")  # fmt: skip
+        raise RecordingError(
+            f"{path}: expected a (2, N) array of time and signal, got shape {arr.shape}"
+        )
     arr = arr if arr.shape[0] == 2 else arr.T
     return Recording(t=arr[0].astype(float), columns={"signal": arr[1].astype(float)})
 
@@ -152,11 +154,15 @@ def check_samples(t: np.ndarray, x: np.ndarray, *, where: str = "recording", min
     for name, arr in (("time", t), ("signal", x)):
         bad = np.flatnonzero(~np.isfinite(arr))
         if bad.size:
-            raise RecordingError(f"{where}: {bad.size} non-finite {name} value(s), first at "
-                                 f"row {bad[0]}; remove or interpolate them")  # fmt: skip
+            raise RecordingError(
+                f"{where}: {bad.size} non-finite {name} value(s), first at "
+                f"row {bad[0]}; remove or interpolate them"
+            )
     steps = np.diff(t)
     bad = np.flatnonzero(steps <= 0)
     if bad.size:
         kind = "duplicate" if steps[bad[0]] == 0 else "decreasing"
-        raise RecordingError(f"{where}: {kind} timestamp at row {bad[0] + 1} "
-                             f"(t = {t[bad[0] + 1]!r}); timestamps must increase")  # fmt: skip
+        raise RecordingError(
+            f"{where}: {kind} timestamp at row {bad[0] + 1} "
+            f"(t = {t[bad[0] + 1]!r}); timestamps must increase"
+        )

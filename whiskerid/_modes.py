@@ -58,21 +58,27 @@ def _brackets(n_modes: int) -> tuple[np.ndarray, np.ndarray]:
         return np.cos(b) * np.tanh(b) - np.sin(b)
 
     hi = np.array(
-        [_bisect_np(g0, (2 * i - 1) * np.pi / 2 - 0.4, (2 * i - 1) * np.pi / 2 + 0.4)
-         for i in range(1, n_modes + 1)]
-    )  # fmt: skip
+        [
+            _bisect_np(g0, (2 * i - 1) * np.pi / 2 - 0.4, (2 * i - 1) * np.pi / 2 + 0.4)
+            for i in range(1, n_modes + 1)
+        ]
+    )
     lo = np.array(
         [0.0]
-        + [_bisect_np(ginf, (4 * k + 1) * np.pi / 4 - 0.2, (4 * k + 1) * np.pi / 4 + 0.2)
-           for k in range(1, n_modes)]
-    )  # fmt: skip
+        + [
+            _bisect_np(ginf, (4 * k + 1) * np.pi / 4 - 0.2, (4 * k + 1) * np.pi / 4 + 0.2)
+            for k in range(1, n_modes)
+        ]
+    )
     return lo, hi
 
 
 def _frequency_function(beta, mu):
     """The frequency equation divided by cosh β (same roots, no overflow)."""
-    return 1.0 / jnp.cosh(beta) + jnp.cos(beta) + mu * beta * (
-        jnp.cos(beta) * jnp.tanh(beta) - jnp.sin(beta)
+    return (
+        1.0 / jnp.cosh(beta)
+        + jnp.cos(beta)
+        + mu * beta * (jnp.cos(beta) * jnp.tanh(beta) - jnp.sin(beta))
     )
 
 

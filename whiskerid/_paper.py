@@ -75,14 +75,22 @@ def paper_eq1(
     decay = jnp.exp(-lam * zeta * t)
 
     a_without_exp = (
-        2 * rho_a * h_b * l**4 * omega_b**2 * jnp.sin(omega_b * t)
-        * (jnp.cos(d) - 1) * (jnp.cosh(d) - 1) * (jnp.cos(d) + jnp.cosh(d))
-    )  # fmt: skip
+        2
+        * rho_a
+        * h_b
+        * l**4
+        * omega_b**2
+        * jnp.sin(omega_b * t)
+        * (jnp.cos(d) - 1)
+        * (jnp.cosh(d) - 1)
+        * (jnp.cos(d) + jnp.cosh(d))
+    )
     dx = d * x / l
     b = (
-        jnp.sinh(dx) - jnp.sin(dx)
+        jnp.sinh(dx)
+        - jnp.sin(dx)
         + (jnp.cos(dx) - jnp.cosh(dx)) * (jnp.sin(d) + jnp.sinh(d)) / (jnp.cos(d) + jnp.cosh(d))
-    )  # fmt: skip
+    )
     # e^{−ζλt} · 𝒞, with e^{−ζλt} e^{+ζλt} = 1 taken exactly.
     decay_times_c = (
         zeta * decay * jnp.sin(lam * root * t) - root + decay * jnp.cos(lam * root * t) * root

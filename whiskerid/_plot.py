@@ -11,9 +11,7 @@ def _pyplot():
     try:
         import matplotlib
     except ImportError:
-        raise RuntimeError(
-            'plotting needs matplotlib: pip install "whiskerid[plot]"'
-        ) from None
+        raise RuntimeError('plotting needs matplotlib: pip install "whiskerid[plot]"') from None
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -25,8 +23,13 @@ def _spectrum_axes(ax, t, x, *, label: str, n_peaks: int = 3) -> None:
     freqs, amps = amplitude_spectrum(xu, rate)
     ax.semilogy(freqs, np.maximum(amps, 1e-30), lw=0.8)
     for p in find_peaks(freqs, amps, n=n_peaks, min_separation_hz=2.0):
-        ax.annotate(f"{p.frequency_hz:.1f} Hz", (p.frequency_hz, p.amplitude), fontsize=7,
-                    xytext=(3, 3), textcoords="offset points")  # fmt: skip
+        ax.annotate(
+            f"{p.frequency_hz:.1f} Hz",
+            (p.frequency_hz, p.amplitude),
+            fontsize=7,
+            xytext=(3, 3),
+            textcoords="offset points",
+        )
     ax.set_xlabel("frequency (Hz)")
     ax.set_ylabel(f"|FFT| {label}")
     ax.set_xlim(0, freqs[-1])
@@ -56,16 +59,19 @@ def plot_modal_analysis(path: str | Path, cases: list[dict]) -> Path:
         cases: Dicts with ``t``, ``y``, ``hb_m``, ``fb_hz`` (and optional ``model``).
     """
     plt = _pyplot()
-    fig, axes = plt.subplots(len(cases), 2, figsize=(10, 2.3 * len(cases)),
-                             constrained_layout=True, squeeze=False)  # fmt: skip
+    fig, axes = plt.subplots(
+        len(cases), 2, figsize=(10, 2.3 * len(cases)), constrained_layout=True, squeeze=False
+    )
     for (ax_t, ax_f), case in zip(axes, cases, strict=True):
         t, y = np.asarray(case["t"]), np.asarray(case["y"])
         shown = t <= t[0] + 0.1
         ax_t.plot(t[shown] * 1e3, y[shown] * 1e6, lw=0.8)
         ax_t.set_xlabel("t (ms)")
         ax_t.set_ylabel("y_s (µm)")
-        ax_t.set_title(f"{case.get('model', '')} h_b = {case['hb_m'] * 1e3:g} mm, "
-                       f"f_b = {case['fb_hz']:g} Hz", fontsize=9)  # fmt: skip
+        ax_t.set_title(
+            f"{case.get('model', '')} h_b = {case['hb_m'] * 1e3:g} mm, f_b = {case['fb_hz']:g} Hz",
+            fontsize=9,
+        )
         _spectrum_axes(ax_f, t, y, label="y_s")
         ax_f.set_xlim(0, min(1000.0, ax_f.get_xlim()[1]))
     return _save(fig, path)

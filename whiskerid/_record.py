@@ -165,8 +165,11 @@ def record_from_dict(data: dict[str, Any]) -> WhiskerRecord:
     zeta = _get(damping, "zeta", "damping")
     zeta = tuple(float(z) for z in zeta) if isinstance(zeta, list) else zeta
     n_modes = len(zeta) if isinstance(zeta, tuple) else damping.get("n_modes", 5)
-    hall_keys = {"hall_gain_v_per_m": "gain_v_per_m", "hall_offset_v": "offset_v",
-                 "hall_quadratic_v_per_m2": "quadratic_v_per_m2"}  # fmt: skip
+    hall_keys = {
+        "hall_gain_v_per_m": "gain_v_per_m",
+        "hall_offset_v": "offset_v",
+        "hall_quadratic_v_per_m2": "quadratic_v_per_m2",
+    }
     try:
         hall = HallSensor(**{v: sensor[k] for k, v in hall_keys.items() if k in sensor})
         adc = ADS1115Model(**data.get("adc", {}))
@@ -208,8 +211,10 @@ def _structure(table: dict) -> Structure:
     names = {f.name for f in fields(cls)} - {"kind"}
     unknown = set(table) - names - {"kind"}
     if unknown:
-        raise RecordError(f"structure: unknown field(s) {sorted(unknown)} for kind {kind!r}; "
-                          f"known: {sorted(names)}")  # fmt: skip
+        raise RecordError(
+            f"structure: unknown field(s) {sorted(unknown)} for kind {kind!r}; "
+            f"known: {sorted(names)}"
+        )
     try:
         return cls(**{k: v for k, v in table.items() if k != "kind"})
     except TypeError as err:  # a required field is absent
@@ -229,8 +234,10 @@ def _check_record(rec: WhiskerRecord) -> None:
         raise RecordError(f"tip_mass_kg = {rec.tip_mass_kg!r} must be zero or positive")
     x = rec.sensor_position_m
     if not isinstance(x, int | float) or not 0 <= x <= rec.structure.length_m:
-        raise RecordError(f"sensor.position_m = {x!r} must lie on the beam, between 0 and "
-                          f"structure.length_m = {rec.structure.length_m} m")  # fmt: skip
+        raise RecordError(
+            f"sensor.position_m = {x!r} must lie on the beam, between 0 and "
+            f"structure.length_m = {rec.structure.length_m} m"
+        )
 
 
 def paper_record() -> WhiskerRecord:

@@ -104,8 +104,11 @@ def observe(
     """
     x = whisker.sensor_x_m if x_m is None else jnp.asarray(x_m, dtype=float)
     phi = shape_at(whisker, x)
-    series = {"deflection": (state.q, state.base_acc), "velocity": (state.qd, state.base_jerk),
-              "acceleration": (state.qdd, state.base_snap)}  # fmt: skip
+    series = {
+        "deflection": (state.q, state.base_acc),
+        "velocity": (state.qd, state.base_jerk),
+        "acceleration": (state.qdd, state.base_snap),
+    }
     if observable not in series:
         raise ValueError(f"observable must be one of {OBSERVABLES}, not {observable!r}")
     modal, base_derivative = series[observable]

@@ -68,8 +68,10 @@ class ADS1115Model:
         spec.check_fsr(self.fsr_v)
         spec.check_data_rate(self.data_rate_sps)
         if not -spec.OSCILLATOR_TOLERANCE * 2 < self.clock_error < spec.OSCILLATOR_TOLERANCE * 2:
-            raise ValueError(f"clock_error = {self.clock_error!r} is not a plausible fraction "
-                             "(the datasheet gives +-0.10)")  # fmt: skip
+            raise ValueError(
+                f"clock_error = {self.clock_error!r} is not a plausible fraction "
+                "(the datasheet gives +-0.10)"
+            )
         if self.noise_v_rms < 0 or self.jitter_s < 0:
             raise ValueError("noise_v_rms and jitter_s must be zero or positive")
         if self.averaging_points < 1:
@@ -127,12 +129,14 @@ class ADS1115Model:
         The first sample completes one conversion after the start, so every averaging window
         lies at ``t ≥ 0``.
         """
-        n = int(round(duration_s * rate_hz))
+        n = round(duration_s * rate_hz)
         t = self.conversion_time_s + np.arange(n) / rate_hz
         if self.jitter_s > 0:
             if rng is None:
                 raise ValueError("sample_times() needs rng when jitter_s > 0")
             # Clipped so that jitter never reorders samples.
-            jitter = np.clip(rng.standard_normal(n) * self.jitter_s, -0.45 / rate_hz, 0.45 / rate_hz)
+            jitter = np.clip(
+                rng.standard_normal(n) * self.jitter_s, -0.45 / rate_hz, 0.45 / rate_hz
+            )
             t = t + jitter
         return t

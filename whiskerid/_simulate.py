@@ -65,12 +65,16 @@ def _signal_function(
     """A vectorised JAX function ``t ↦ deflection or acceleration`` at the sensor."""
     whisker = record.whisker()
     if model in ("paper", "steady") and excitation != "sine":
-        raise ValueError(f"model {model!r} is defined for --excitation sine only; "
-                         "use --model exact for decay or base")  # fmt: skip
+        raise ValueError(
+            f"model {model!r} is defined for --excitation sine only; "
+            "use --model exact for decay or base"
+        )
     if model == "paper":
         if observable != "deflection":
-            raise ValueError("model 'paper' gives a displacement only (Eq. 1); use --model "
-                             "steady or exact for accelerations")  # fmt: skip
+            raise ValueError(
+                "model 'paper' gives a displacement only (Eq. 1); use --model "
+                "steady or exact for accelerations"
+            )
         return lambda t: paper_eq1(whisker, t, fb_hz=fb_hz, hb_m=hb_m)
 
     absolute = observable == "acceleration"
@@ -82,9 +86,11 @@ def _signal_function(
     if excitation == "decay":
         q0 = pluck(whisker, tip_deflection_m)
         return lambda t: observe(
-            whisker, free_decay(whisker, jnp.maximum(t, 0.0), q0=q0), observable,
+            whisker,
+            free_decay(whisker, jnp.maximum(t, 0.0), q0=q0),
+            observable,
             absolute=absolute,
-        )  # fmt: skip
+        )
     if base is None:
         raise ValueError("--excitation base needs a base-motion file (--base FILE)")
     # Solve on a fine uniform grid (the input linearly interpolated), then interpolate.
@@ -136,9 +142,17 @@ def simulate(
     _check_inputs(model, excitation, observable, fb_hz, hb_m, rate_hz, duration_s)
     rng = np.random.default_rng(seed)
     physical = "acceleration" if observable == "acceleration" else "deflection"
-    fn = _signal_function(record, model, excitation, physical, fb_hz=fb_hz, hb_m=hb_m,
-                          tip_deflection_m=tip_deflection_m, base=base,
-                          oversample_hz=max(20 * rate_hz, 20_000.0))  # fmt: skip
+    fn = _signal_function(
+        record,
+        model,
+        excitation,
+        physical,
+        fb_hz=fb_hz,
+        hb_m=hb_m,
+        tip_deflection_m=tip_deflection_m,
+        base=base,
+        oversample_hz=max(20 * rate_hz, 20_000.0),
+    )
     adc = record.adc
     if jitter_s is None:
         jitter_s = adc.jitter_s if observable in ("voltage", "adc") else 0.0
@@ -146,10 +160,9 @@ def simulate(
     if observable in ("voltage", "adc"):
         t = adc.sample_times(rate_hz, duration_s, rng=rng)
     else:
-        t = np.arange(int(round(duration_s * rate_hz))) / rate_hz
+        t = np.arange(round(duration_s * rate_hz)) / rate_hz
         if jitter_s > 0:
-            t = t + np.clip(rng.standard_normal(t.size) * jitter_s, -0.45 / rate_hz,
-                            0.45 / rate_hz)  # fmt: skip
+            t = t + np.clip(rng.standard_normal(t.size) * jitter_s, -0.45 / rate_hz, 0.45 / rate_hz)
             t = t - min(0.0, t[0])
     values = _observe(record, adc, fn, t, observable, noise_db, rng)
     meta = {
@@ -195,8 +208,11 @@ def _noise(clean: np.ndarray, noise_db: float | None, rng: np.random.Generator) 
 
 
 def _check_inputs(model, excitation, observable, fb_hz, hb_m, rate_hz, duration_s) -> None:
-    for name, value, allowed in (("model", model, MODELS), ("excitation", excitation,
-                                 EXCITATIONS), ("observable", observable, SIM_OBSERVABLES)):  # fmt: skip
+    for name, value, allowed in (
+        ("model", model, MODELS),
+        ("excitation", excitation, EXCITATIONS),
+        ("observable", observable, SIM_OBSERVABLES),
+    ):
         if value not in allowed:
             raise ValueError(f"{name} must be one of {', '.join(allowed)}; got {value!r}")
     for name, value in (("rate_hz", rate_hz), ("duration_s", duration_s), ("fb_hz", fb_hz)):

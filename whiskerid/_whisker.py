@@ -60,8 +60,9 @@ class Whisker(eqx.Module):
     def __check_init__(self):
         for name in ("length_m", "EI", "rho_a", "tip_mass_kg", "sensor_x_m"):
             if jnp.ndim(getattr(self, name)) != 0:
-                raise ValueError(f"Whisker.{name} must be a scalar, got shape "
-                                 f"{jnp.shape(getattr(self, name))}")  # fmt: skip
+                raise ValueError(
+                    f"Whisker.{name} must be a scalar, got shape {jnp.shape(getattr(self, name))}"
+                )
         if self.zeta.ndim != 1 or self.zeta.shape[0] < 1:
             raise ValueError(f"Whisker.zeta must have shape (modes,), got {self.zeta.shape}")
         if _is_concrete(self.length_m, self.EI, self.rho_a, self.zeta, self.sensor_x_m):
@@ -116,9 +117,12 @@ def _check_values(w: Whisker) -> None:
         ("rho_a", float(w.rho_a) > 0, "must be positive"),
         ("tip_mass_kg", float(w.tip_mass_kg) >= 0, "must be zero or positive"),
         ("zeta", bool(jnp.all((w.zeta >= 0) & (w.zeta < 1))), "must satisfy 0 <= zeta < 1"),
-        ("sensor_x_m", 0 <= float(w.sensor_x_m) <= float(w.length_m),
-         f"must lie on the beam, between 0 and length_m = {float(w.length_m)} m"),
-    ]  # fmt: skip
+        (
+            "sensor_x_m",
+            0 <= float(w.sensor_x_m) <= float(w.length_m),
+            f"must lie on the beam, between 0 and length_m = {float(w.length_m)} m",
+        ),
+    ]
     for name, ok, why in checks:
         if not ok or not bool(jnp.all(jnp.isfinite(getattr(w, name)))):
             raise ValueError(f"{name} = {_show(getattr(w, name))} {why}")
@@ -152,8 +156,14 @@ class CoilSpring:
     kind: Literal["coil"] = "coil"
 
     def __post_init__(self):
-        for name in ("length_m", "wire_radius_m", "mean_coil_radius_m", "n_coils",
-                     "wire_density_kg_m3", "shear_modulus_pa"):  # fmt: skip
+        for name in (
+            "length_m",
+            "wire_radius_m",
+            "mean_coil_radius_m",
+            "n_coils",
+            "wire_density_kg_m3",
+            "shear_modulus_pa",
+        ):
             _require_positive(name, getattr(self, name))
 
     @property

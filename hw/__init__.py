@@ -1,0 +1,30 @@
+"""Raspberry Pi side of whiskerid: ADS1115 driver, emulator, fixed-rate sampler, recorder.
+
+Light on purpose (numpy and, on the Pi, smbus2; no JAX), so it starts fast on a small board.
+See ``hw/README.md`` for wiring and setup.
+"""
+
+from ._ads1115 import ADS1115 as ADS1115
+from ._ads1115 import DEFAULT_CONFIG as DEFAULT_CONFIG
+from ._ads1115 import MUX_CODES as MUX_CODES
+from ._ads1115 import POWER_ON_CONFIG as POWER_ON_CONFIG
+from ._ads1115 import Config as Config
+from ._ads1115 import ConversionTimeout as ConversionTimeout
+from ._ads1115 import DriverStats as DriverStats
+from ._ads1115 import I2CError as I2CError
+from ._ads1115 import code_to_volts as code_to_volts
+from ._ads1115 import decode_config as decode_config
+from ._ads1115 import decode_conversion as decode_conversion
+from ._ads1115 import encode_config as encode_config
+from ._ads1115 import open_bus as open_bus
+from ._ads1115 import volts_to_code as volts_to_code
+from ._emulator import EmulatedADS1115 as EmulatedADS1115
+from ._emulator import FakeClock as FakeClock
+from ._emulator import source_from_recording as source_from_recording
+from ._recorder import CSVRecording as CSVRecording
+from ._recorder import Recorder as Recorder
+from ._recorder import read_recording_csv as read_recording_csv
+from ._recorder import unique_path as unique_path
+from ._sampler import Sample as Sample
+from ._sampler import Sampler as Sampler
+from ._sampler import SamplerStats as SamplerStats

@@ -1,0 +1,253 @@
+"""Crash-tolerant CSV recording in the whiskerid recording format, and a tolerant reader.
+
+Format (NOTES section 6): leading ``# key: value`` metadata lines, a header ``t,<column>...``,
+then one row per sample with ``t`` in seconds since the start of the recording. The writer
+flushes and fsyncs at least once per second, so a crash or a power cut loses at most the last
+second, and possibly leaves a torn last line, which :func:`read_recording_csv` skips.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import os
+import time
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any, TextIO
+
+import numpy as np
+
+from ._sampler import Sample
+
+
+def unique_path(path: str | os.PathLike[str]) -> Path:
+    """Return ``path`` if it does not exist, else the first free ``stem-N.suffix`` (N = 1, 2...).
+
+    Useful for a service that restarts and must not overwrite its previous recording.
+    """
+    p = Path(path)
+    n = 0
+    candidate = p
+    while candidate.exists():
+        n += 1
+        candidate = p.with_name(f"{p.stem}-{n}{p.suffix}")
+    return candidate
+
+
+def _fsync_dir(directory: Path) -> None:
+    # Make the new directory entry durable too, or a power cut could lose the whole file.
+    try:
+        fd = os.open(directory, os.O_RDONLY)
+    except OSError:  # e.g. platforms that cannot open directories
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+class Recorder:
+    """Write samples to a recording CSV, durable to within ``sync_interval_s``.
+
+    Args:
+        path: Output file. It must not exist unless ``overwrite`` is True.
+        columns: Signal column names after ``t`` (``"voltage"`` matches the simulator's
+            observable name for volts).
+        rate_hz: Nominal sample rate, written as metadata.
+        units: Units of the signal columns, written as metadata.
+        whisker: Optional whisker name or file, written as metadata.
+        metadata: More ``key: value`` metadata lines.
+        sync_interval_s: Longest time between flush + fsync, in seconds.
+        overwrite: Replace an existing file instead of raising ``FileExistsError``.
+        clock: Monotonic clock in integer nanoseconds (decides when to sync).
+        fsync: Function used to sync a file descriptor (``os.fsync``; injectable for tests).
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        columns: Sequence[str] = ("voltage",),
+        rate_hz: float | None = None,
+        units: str | None = "V",
+        whisker: str | None = None,
+        metadata: Mapping[str, Any] | None = None,
+        sync_interval_s: float = 1.0,
+        overwrite: bool = False,
+        clock: Callable[[], int] = time.monotonic_ns,
+        fsync: Callable[[int], None] = os.fsync,
+    ) -> None:
+        self.columns = tuple(columns)
+        if not self.columns or any(
+            not c or "," in c or "\n" in c or c == "t" for c in self.columns
+        ):
+            raise ValueError(f"bad column names {self.columns!r}: need non-empty names without ',' "
+                             "or newlines, other than 't'")  # fmt: skip
+        self.path = Path(path)
+        self.sync_interval_ns = round(sync_interval_s * 1e9)
+        self.rows = 0
+        self.syncs = 0
+        self._clock = clock
+        self._fsync = fsync
+        meta: dict[str, Any] = {}
+        if rate_hz is not None:
+            meta["rate_hz"] = rate_hz
+        if units is not None:
+            meta["units"] = units
+        if whisker is not None:
+            meta["whisker"] = whisker
+        meta["started_utc"] = (
+            datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds").replace("+00:00", "Z")
+        )
+        meta.update(metadata or {})
+        for key, value in meta.items():
+            if ":" in str(key) or "\n" in f"{key}{value}":
+                raise ValueError(
+                    f"metadata {key!r}: {value!r} cannot hold ':' in the key or newlines"
+                )
+        self.metadata = meta
+        # newline="" writes "\n" on every platform; the reader relies on it to spot torn lines.
+        self._file: TextIO | None = open(  # closed in close()
+            self.path, "w" if overwrite else "x", encoding="utf-8", newline=""
+        )
+        lines = [f"# {k}: {v}\n" for k, v in meta.items()]
+        lines.append(",".join(("t", *self.columns)) + "\n")
+        self._file.write("".join(lines))
+        self.sync()
+        _fsync_dir(self.path.parent.resolve())
+
+    def write(self, t_s: float, *values: float) -> None:
+        """Append one row; sync if the last sync is ``sync_interval_s`` old.
+
+        Args:
+            t_s: Seconds since the start of the recording.
+            *values: One value per signal column.
+        """
+        if self._file is None:
+            raise ValueError("the recorder is closed")
+        if len(values) != len(self.columns):
+            raise ValueError(f"expected {len(self.columns)} values, got {len(values)}")
+        # repr-like precision: 1 ns in t, 9 significant digits for the 16-bit signal.
+        self._file.write(f"{t_s:.9f}," + ",".join(f"{v:.9g}" for v in values) + "\n")
+        self.rows += 1
+        self.maybe_sync()
+
+    def write_sample(self, sample: Sample) -> None:
+        """Append a :class:`Sample` as ``t, volts`` (one signal column); usable as a callback."""
+        self.write(sample.t_s, sample.volts)
+
+    __call__ = write_sample
+
+    def maybe_sync(self) -> bool:
+        """Sync if due; call it from a loop that may go a while without writing (e.g. gaps).
+
+        Returns:
+            True if it synced.
+        """
+        if self._clock() - self._last_sync_ns >= self.sync_interval_ns:
+            self.sync()
+            return True
+        return False
+
+    def sync(self) -> None:
+        """Flush Python's buffer and fsync the file so the rows survive a power cut."""
+        if self._file is None:
+            return
+        self._file.flush()
+        self._fsync(self._file.fileno())
+        self.syncs += 1
+        self._last_sync_ns = self._clock()
+
+    def close(self) -> None:
+        """Sync and close the file (idempotent)."""
+        if self._file is None:
+            return
+        try:
+            self.sync()
+        finally:
+            self._file.close()
+            self._file = None
+
+    @property
+    def closed(self) -> bool:
+        """True once :meth:`close` has run."""
+        return self._file is None
+
+    def __enter__(self) -> Recorder:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+
+@dataclasses.dataclass(frozen=True)
+class CSVRecording:
+    """A recording read back by :func:`read_recording_csv` (fields as in ``whiskerid.Recording``).
+
+    Attributes:
+        t: Times in seconds, shape (n,).
+        columns: Signal column name -> values, each shape (n,).
+        meta: The ``# key: value`` lines, values as strings.
+        torn: True if a torn last line was dropped.
+    """
+
+    t: np.ndarray
+    columns: dict[str, np.ndarray]
+    meta: dict[str, str]
+    torn: bool = False
+
+
+def read_recording_csv(path: str | os.PathLike[str]) -> CSVRecording:
+    """Read a recording CSV, tolerating a torn last line left by a crash.
+
+    The writer ends every row with a newline, so a last line without one was cut mid-write and
+    is dropped even if it parses (``1.25,0.5`` may be the start of ``1.25,0.5123``). Trailing
+    NUL bytes (what some filesystems leave after a power cut) are ignored. Anything malformed
+    before the last line is an error, not a crash artefact.
+
+    Args:
+        path: The CSV file.
+
+    Returns:
+        The recording.
+
+    Raises:
+        ValueError: If the header is missing or a complete row is malformed.
+    """
+    text = Path(path).read_bytes().rstrip(b"\0").decode("utf-8", errors="replace")
+    lines = text.split("\n")
+    torn = lines[-1] != ""  # "" when the file ends with a newline
+    lines = lines[:-1]
+    metadata: dict[str, str] = {}
+    i = 0
+    while i < len(lines) and lines[i].startswith("#"):
+        key, sep, value = lines[i][1:].partition(":")
+        if sep:
+            metadata[key.strip()] = value.strip()
+        i += 1
+    if i >= len(lines):
+        raise ValueError(f"{path}: no header line 't,<column>...'")
+    header = [h.strip() for h in lines[i].split(",")]
+    if header[0] != "t" or len(header) < 2:
+        raise ValueError(f"{path}: header must be 't,<column>...', got {lines[i]!r}")
+    rows = []
+    for lineno, line in enumerate(lines[i + 1 :], start=i + 2):
+        if not line.strip():
+            continue
+        fields = line.split(",")
+        try:
+            if len(fields) != len(header):
+                raise ValueError(f"{len(fields)} fields, expected {len(header)}")
+            rows.append([float(f) for f in fields])
+        except ValueError as e:
+            raise ValueError(f"{path}:{lineno}: malformed row {line!r}: {e}") from None
+    data = np.array(rows, dtype=np.float64).reshape(len(rows), len(header))
+    return CSVRecording(
+        t=data[:, 0].copy(),
+        columns={name: data[:, j].copy() for j, name in enumerate(header[1:], start=1)},
+        meta=metadata,
+        torn=torn,
+    )
