@@ -232,42 +232,61 @@ def harmonic_from_rest(
     return steady._replace(q=steady.q + q, qd=steady.qd + qd, qdd=steady.qdd + qdd)
 
 
-def base_motion_response(whisker: Whisker, t: Times, base_acc: Samples) -> ModalState:
+def base_motion_response(
+    whisker: Whisker, t: Times, base_acc: Samples, *, uniform: bool = False
+) -> ModalState:
     """Response from rest to a sampled base acceleration ``ÿ_b(t_k)`` (m/s²).
 
     The input is taken as piecewise linear between samples; for such an input the
     per-step update is exact: with ``u(s) = u_k + (u_{k+1} − u_k) s/h``, a particular
     solution is ``q_p(s) = c₀ + c₁ s`` (``c₁ = b/ω²``, ``c₀ = a/ω² − 2ζ b/ω³``), so
     ``x_{k+1} = Φ(h) (x_k − x_p(0)) + x_p(h)`` with the closed-form transition matrix
-    ``Φ(h) = e^{A h}``. Steps may differ (non-uniform timestamps). ``t`` must increase;
-    the response is zero at ``t[0]``.
+    ``Φ(h) = e^{A h}``. ``t`` must increase; the response is zero at ``t[0]``.
+
+    Args:
+        whisker: The whisker.
+        t: Sample times (s); steps may differ (non-uniform timestamps).
+        base_acc: Base acceleration at ``t`` (m/s²).
+        uniform: Promise that the steps are all equal to ``t[1] − t[0]``: the transition is
+            then computed once instead of at every step (about 3× faster).
     """
     omega, zeta, gamma = modal_params(whisker)
-    wd = _damped(omega, zeta)
     t = jnp.asarray(t, dtype=float)
     u = -jnp.asarray(base_acc, dtype=float)[:, None] * gamma  # modal forcing, (samples, modes)
+    h_all = jnp.diff(t)
 
     def step(carry, inputs):
         q, qd = carry
         h, u0, u1 = inputs
+        phi = fixed if uniform else _transition(omega, zeta, h)
         slope = (u1 - u0) / h
         c1 = slope / omega**2
         c0 = u0 / omega**2 - 2 * zeta * slope / omega**3
         dq, dv = q - c0, qd - c1
-        e = jnp.exp(-zeta * omega * h)
-        c, s = jnp.cos(wd * h), jnp.sin(wd * h)
-        q_new = e * (dq * (c + zeta * omega / wd * s) + dv * s / wd) + c0 + c1 * h
-        qd_new = e * (-dq * omega**2 / wd * s + dv * (c - zeta * omega / wd * s)) + c1
+        q_new = phi[0] * dq + phi[1] * dv + c0 + c1 * h
+        qd_new = phi[2] * dq + phi[3] * dv + c1
         return (q_new, qd_new), (q_new, qd_new)
 
+    if uniform:
+        h_all = jnp.full_like(h_all, t[1] - t[0])
+        fixed = _transition(omega, zeta, h_all[0])
     zeros = jnp.zeros_like(omega)
-    _, (q, qd) = jax.lax.scan(step, (zeros, zeros), (jnp.diff(t), u[:-1], u[1:]))
+    _, (q, qd) = jax.lax.scan(step, (zeros, zeros), (h_all, u[:-1], u[1:]))
     q = jnp.concatenate([zeros[None], q])
     qd = jnp.concatenate([zeros[None], qd])
     qdd = u - 2 * zeta * omega * qd - omega**2 * q
     acc = jnp.asarray(base_acc, dtype=float)
     jerk = _derivative(t, acc)
     return ModalState(q, qd, qdd, acc, jerk, _derivative(t, jerk))
+
+
+def _transition(omega, zeta, h):
+    """Entries ``(Φ₁₁, Φ₁₂, Φ₂₁, Φ₂₂)`` of ``e^{A h}`` for ``q̈ + 2ζωq̇ + ω²q = 0``."""
+    wd = _damped(omega, zeta)
+    e = jnp.exp(-zeta * omega * h)
+    c, s = jnp.cos(wd * h), jnp.sin(wd * h)
+    k = zeta * omega / wd
+    return e * (c + k * s), e * s / wd, -e * omega**2 / wd * s, e * (c - k * s)
 
 
 def _derivative(t, y):

@@ -97,7 +97,7 @@ def _signal_function(
     dt = min(float(np.median(np.diff(base.t))), 1.0 / oversample_hz)
     grid = np.arange(base.t[0], base.t[-1] + 0.5 * dt, dt)
     acc = np.interp(grid, base.t, base.acc)
-    state = base_motion_response(whisker, jnp.asarray(grid), jnp.asarray(acc))
+    state = base_motion_response(whisker, jnp.asarray(grid), jnp.asarray(acc), uniform=True)
     values = observe(whisker, state, observable, absolute=absolute)
     return lambda t: jnp.interp(t, jnp.asarray(grid), values)
 
