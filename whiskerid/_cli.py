@@ -51,8 +51,19 @@ def _add_simulate(sub) -> None:
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     p.add_argument("--whisker", type=Path, help="whisker record (TOML); the paper's by default")
-    p.add_argument("--model", choices=MODELS, default="exact")
-    p.add_argument("--excitation", choices=EXCITATIONS, default="sine")
+    p.add_argument(
+        "--model",
+        choices=MODELS,
+        default="exact",
+        help="paper: Eq. 1 as printed; steady: harmonic steady state; exact: from rest",
+    )
+    p.add_argument(
+        "--excitation",
+        choices=EXCITATIONS,
+        default="sine",
+        help="sine: h_b sin(2 pi f_b t); decay: free decay after a pluck; "
+        "base: a measured base motion (--base)",
+    )
     p.add_argument("--fb", type=float, default=100.0, help="base excitation frequency (Hz)")
     p.add_argument("--hb", type=float, default=1e-4, help="base excitation amplitude (m)")
     p.add_argument(
@@ -73,7 +84,12 @@ def _add_simulate(sub) -> None:
     )
     p.add_argument("--rate", type=float, default=200.0, help="sampling rate (Hz)")
     p.add_argument("--duration", type=float, default=10.0, help="length (s)")
-    p.add_argument("--observable", choices=SIM_OBSERVABLES, default="deflection")
+    p.add_argument(
+        "--observable",
+        choices=SIM_OBSERVABLES,
+        default="deflection",
+        help="what the recording holds (see above)",
+    )
     p.add_argument("--noise-db", type=float, help="add white noise at this SNR (dB)")
     p.add_argument(
         "--jitter",

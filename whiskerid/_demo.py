@@ -66,7 +66,8 @@ def run_demo(out: Path, *, plots: bool = True, say=print) -> dict:
             record, model="exact", observable="adc", rate_hz=200.0, duration_s=5.0, seed=1, **kwargs
         )
         path = write_csv(out / f"{label}_adc.csv", sim)
-        peaks = [round(p.frequency_hz, 2) for p in dominant_peaks(sim.t, sim.signal(), n=2)]
+        found = dominant_peaks(sim.t, sim.signal(), n=2, min_separation_hz=10.0)
+        peaks = [round(p.frequency_hz, 2) for p in found]
         recordings[label] = {"csv": str(path), "peaks_hz": peaks}
         say(
             f"      {label}: {path} peaks {peaks} Hz (f_1 = {f_n[0]:.1f} Hz; f_2 = {f_n[1]:.1f} "

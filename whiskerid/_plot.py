@@ -22,7 +22,7 @@ def _spectrum_axes(ax, t, x, *, label: str, n_peaks: int = 3) -> None:
     _, xu, rate = resample_uniform(t, x)
     freqs, amps = amplitude_spectrum(xu, rate)
     ax.semilogy(freqs, np.maximum(amps, 1e-30), lw=0.8)
-    for p in find_peaks(freqs, amps, n=n_peaks, min_separation_hz=2.0):
+    for p in find_peaks(freqs, amps, n=n_peaks, min_separation_hz=8.0):
         ax.annotate(
             f"{p.frequency_hz:.1f} Hz",
             (p.frequency_hz, p.amplitude),
