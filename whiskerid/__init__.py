@@ -10,6 +10,9 @@ Public API, re-exported from private modules (SI units throughout):
   (:func:`harmonic_steady_state`, :func:`harmonic_from_rest`, :func:`free_decay`,
   :func:`base_motion_response`, :func:`observe`);
 * sensing: :class:`HallSensor`, :class:`ADS1115Model`, :func:`simulate`;
+* calibration: :func:`calibrate` (κ/f_1, ζ, EI or C with uncertainties from recordings and
+  static tests), :class:`Observation`, :class:`StaticTest`, :class:`Calibration`, and
+  :func:`fit_windows` (batched per-window damped-oscillation fits);
 * signals and files: :func:`dominant_peaks`, :class:`Recording`, :func:`read_recording`,
   :func:`write_csv`.
 
@@ -23,6 +26,14 @@ import jax as _jax
 
 _jax.config.update("jax_enable_x64", True)
 
+from ._calibrate import Calibration as Calibration
+from ._calibrate import CalibrationError as CalibrationError
+from ._calibrate import Observation as Observation
+from ._calibrate import StaticTest as StaticTest
+from ._calibrate import WindowFits as WindowFits
+from ._calibrate import calibrate as calibrate
+from ._calibrate import fit_windows as fit_windows
+from ._calibrate import read_static_test as read_static_test
 from ._io import Recording as Recording
 from ._io import RecordingError as RecordingError
 from ._io import check_samples as check_samples

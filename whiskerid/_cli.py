@@ -208,6 +208,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _add_demo(sub)
     _add_simulate(sub)
+    from ._calibrate_cli import add_calibrate
+
+    add_calibrate(sub, CommandError)
     return parser
 
 

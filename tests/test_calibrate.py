@@ -1,0 +1,268 @@
+"""Calibration: recovery of known parameters from simulated recordings, identifiability,
+batched window fits, and the real aluminium cantilever (skipped when its data is absent)."""
+
+from dataclasses import replace
+from pathlib import Path
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import ALU
+
+import whiskerid as wi
+from whiskerid._calibrate import release_time
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "cantilever"
+
+
+def _off_by_30_percent(rec: wi.WhiskerRecord) -> wi.WhiskerRecord:
+    """The nominal record a user starts from: f_1 30 % high, ζ 30 % high."""
+    s = rec.structure
+    return rec.replace(
+        structure=replace(s, shear_modulus_pa=s.shear_modulus_pa * 1.3**2), zeta=0.052
+    )
+
+
+@pytest.fixture(scope="module")
+def paper():
+    rec = wi.paper_record()
+    w = rec.whisker()
+    return rec, float(w.natural_frequencies_hz[0]), float(w.zeta[0])
+
+
+@pytest.fixture(scope="module")
+def decay_fit(paper):
+    rec, _, _ = paper
+    sim = wi.simulate(
+        rec,
+        excitation="decay",
+        observable="adc",
+        rate_hz=200,
+        duration_s=10,
+        noise_db=30,
+        seed=11,
+        tip_deflection_m=2e-3,
+    )
+    obs = wi.Observation(sim.t, sim.signal(), excitation="decay", observable="adc", gain=None)
+    return wi.calibrate(_off_by_30_percent(rec), obs)
+
+
+def test_decay_adc_200hz_recovers_f1_and_zeta_from_30_percent_off(paper, decay_fit):
+    _, f1, zeta = paper
+    p = decay_fit.params
+    assert decay_fit.ok and decay_fit.status == "ok"
+    assert abs(p["f1_hz"]["value"] / f1 - 1) < 1e-3
+    assert abs(p["zeta"]["value"] / zeta - 1) < 0.03
+    # the 1-sigma is honest in size: the error is within a few sigma, and sigma is not huge
+    assert abs(p["f1_hz"]["value"] - f1) < 5 * p["f1_hz"]["std"] < 0.01 * f1
+    assert 0.5 < decay_fit.diagnostics["reduced_chi2"] < 2
+
+
+def test_vibrations_alone_never_report_both_EI_and_C(decay_fit):
+    p = decay_fit.params
+    assert "EI" in p and "C" not in p and decay_fit.fixed["C"] == pytest.approx(6.207, rel=1e-3)
+    assert "kappa" in p and "not both identified" in decay_fit.note
+    # EI (via the geometry's rho*a) carries kappa's relative uncertainty
+    rel = p["EI"]["std"] / p["EI"]["value"]
+    assert rel == pytest.approx(p["kappa"]["std"] / p["kappa"]["value"], rel=1e-6)
+    # the [fit] table records status, sigma, correlations and what was fixed
+    fit = decay_fit.record.extra["fit"]
+    assert fit["status"] == "ok" and fit["params"]["zeta"]["std"] > 0
+    names = fit["correlations"]["names"]
+    assert np.allclose(np.diag(fit["correlations"]["matrix"]), 1.0) and "zeta" in names
+    # the written record reproduces the fitted f_1
+    f1_rec = float(decay_fit.record.whisker().natural_frequencies_hz[0])
+    assert f1_rec == pytest.approx(p["f1_hz"]["value"], rel=1e-9)
+
+
+def test_material_pin_reports_C_not_EI(paper):
+    rec, _, _ = paper
+    sim = wi.simulate(
+        rec,
+        excitation="decay",
+        observable="deflection",
+        rate_hz=400,
+        duration_s=2,
+        noise_db=40,
+        seed=2,
+    )
+    obs = wi.Observation(sim.t, sim.signal(), excitation="decay", observable="deflection")
+    cal = wi.calibrate(rec, obs, pin="material", n_modes=1)
+    assert "C" in cal.params and "EI" not in cal.params and "EI" in cal.fixed
+    assert cal.params["C"]["value"] == pytest.approx(6.207, rel=2e-3)
+
+
+def test_static_test_pins_EI_so_C_follows(paper):
+    rec, _, _ = paper
+    ei = rec.structure.EI
+    rng = np.random.default_rng(4)
+    force = np.linspace(0.0, 0.05, 8)
+    defl = force * 0.06**3 / (3 * ei) + 2e-7 * rng.standard_normal(8)
+    static = wi.StaticTest(force, defl)
+    sim = wi.simulate(
+        rec,
+        excitation="decay",
+        observable="voltage",
+        rate_hz=200,
+        duration_s=4,
+        noise_db=35,
+        seed=5,
+        tip_deflection_m=2e-3,
+    )
+    obs = wi.Observation(sim.t, sim.signal(), excitation="decay", observable="voltage", gain=None)
+    cal = wi.calibrate(_off_by_30_percent(rec), obs, static=static, n_modes=1)
+    p = cal.params
+    assert cal.ok and "EI" in p and "C" in p and "static" in p["C"]["source"]
+    assert p["EI"]["value"] == pytest.approx(ei, rel=0.01)
+    assert p["C"]["value"] == pytest.approx(6.207, rel=0.01)
+    assert abs(p["C"]["value"] - 6.207) < 4 * p["C"]["std"]
+
+
+def test_nonuniform_timestamps(paper):
+    rec, f1, zeta = paper
+    sim = wi.simulate(
+        rec,
+        excitation="decay",
+        observable="adc",
+        rate_hz=200,
+        duration_s=5,
+        noise_db=30,
+        seed=7,
+        jitter_s=1e-3,
+        tip_deflection_m=2e-3,
+    )
+    assert np.std(np.diff(sim.t)) > 3e-4
+    obs = wi.Observation(sim.t, sim.signal(), excitation="decay", observable="adc", gain=None)
+    cal = wi.calibrate(_off_by_30_percent(rec), obs)
+    assert cal.params["f1_hz"]["value"] == pytest.approx(f1, rel=1e-3)
+    assert cal.params["zeta"]["value"] == pytest.approx(zeta, rel=0.05)
+
+
+@pytest.mark.parametrize("hb_known", [True, pytest.param(False, marks=pytest.mark.slow)])
+def test_sine_with_known_and_unknown_amplitude(paper, hb_known):
+    rec, f1, zeta = paper
+    sim = wi.simulate(
+        rec,
+        excitation="sine",
+        fb_hz=30.0,
+        hb_m=2e-4,
+        observable="deflection",
+        rate_hz=1000,
+        duration_s=1.5,
+        noise_db=40,
+        seed=3,
+    )
+    obs = wi.Observation(
+        sim.t,
+        sim.signal(),
+        excitation="sine",
+        observable="deflection",
+        fb_hz=30.0,
+        hb_m=2e-4 if hb_known else None,
+    )
+    cal = wi.calibrate(_off_by_30_percent(rec), obs, n_modes=2)
+    assert cal.ok
+    assert cal.params["f1_hz"]["value"] == pytest.approx(f1, rel=0.005)
+    assert cal.params["zeta"]["value"] == pytest.approx(zeta, rel=0.1)
+    if not hb_known:
+        assert "product" in cal.per_recording[0]["note"]
+
+
+@pytest.mark.slow
+def test_measured_base_motion(paper):
+    rec, f1, zeta = paper
+    tb = np.arange(0, 2.0, 1e-3)
+    acc = sum(
+        a * np.sin(2 * np.pi * f * tb + p) for a, f, p in ((3, 21, 0.3), (2, 44, 1), (2, 67, 2))
+    )
+    acc = acc * np.minimum(tb / 0.05, 1)
+    sim = wi.simulate(
+        rec,
+        excitation="base",
+        base=wi.BaseMotion(tb, acc),
+        observable="deflection",
+        rate_hz=1000,
+        duration_s=1.9,
+        noise_db=40,
+        seed=8,
+    )
+    obs = wi.Observation(
+        sim.t,
+        sim.signal(),
+        excitation="base",
+        observable="deflection",
+        base_acc=np.interp(sim.t, tb, acc),
+    )
+    cal = wi.calibrate(_off_by_30_percent(rec), obs, n_modes=2)
+    assert cal.ok
+    assert cal.params["f1_hz"]["value"] == pytest.approx(f1, rel=0.005)
+    assert cal.params["zeta"]["value"] == pytest.approx(zeta, rel=0.1)
+
+
+def test_fit_windows_batch_survives_bad_windows():
+    rate, m = 200.0, 200
+    t = np.arange(m) / rate
+    rng = np.random.default_rng(0)
+    fd = rng.uniform(20, 60, 12)
+    zeta = rng.uniform(0.01, 0.05, 12)
+    wd = 2 * np.pi * fd[:, None]
+    windows = 1.5 + np.exp(-zeta[:, None] * wd * t) * np.cos(wd * t + 0.4)
+    windows += 0.01 * rng.standard_normal(windows.shape)
+    windows[3] = np.nan
+    windows[7, 50] = np.inf
+    fits = wi.fit_windows(windows, rate_hz=rate)
+    ok = np.asarray(fits.ok)
+    assert not ok[3] and not ok[7] and ok.sum() == 10
+    good = ok.nonzero()[0]
+    assert np.allclose(np.asarray(fits.damped_frequency_hz)[good], fd[good], rtol=1e-3)
+    assert np.allclose(np.asarray(fits.zeta)[good], zeta[good], rtol=0.1)
+    assert np.isnan(float(fits.zeta[3]))
+    assert np.allclose(np.asarray(fits.offset)[good], 1.5, atol=0.01)
+
+
+def test_bad_observation_is_refused():
+    t = np.arange(100) / 200.0
+    with pytest.raises(wi.RecordingError, match="non-finite"):
+        wi.Observation(t, np.where(t > 0.2, np.nan, 1.0))
+    with pytest.raises(wi.CalibrationError, match="--fb"):
+        wi.Observation(t, np.sin(t), excitation="sine")
+
+
+@pytest.mark.skipif(not DATA.exists(), reason="shared cantilever data not present")
+def test_real_cantilever_30cm():
+    rec = wi.WhiskerRecord(
+        name="alu-30cm",
+        structure=wi.UniformBeam(
+            length_m=0.30,
+            youngs_modulus_pa=ALU["E"],
+            density_kg_m3=ALU["rho"],
+            width_m=ALU["width"],
+            thickness_m=ALU["thickness"],
+        ),
+        zeta=0.01,
+        n_modes=2,
+        tip_mass_kg=ALU["tip_mass"],
+        sensor_position_m=0.24,
+    )
+    path = sorted((DATA / "30cm").glob("*.npy"))[0]
+    a = np.load(path)
+    obs = wi.Observation(a[0], a[1] * 9.80665, observable="acceleration", name=path.name)
+    obs = obs.window(release_time(obs.t, obs.y), None)
+    cal = wi.calibrate(rec, obs, n_modes=1)
+    p = cal.params
+    assert cal.ok
+    assert p["f1_hz"]["value"] == pytest.approx(16.49, rel=0.01)
+    assert p["EI"]["value"] == pytest.approx(rec.structure.EI, rel=0.05)
+    assert 1e-3 < p["zeta"]["value"] < 1e-2
+
+
+def test_window_model_matches_jax_free_decay():
+    """The window model is the one-mode free decay of the exact model."""
+    w = wi.paper_whisker(1)
+    t = jnp.linspace(0, 0.2, 300)
+    y = wi.observe(w, wi.free_decay(w, t, q0=jnp.array([1e-3])))
+    fits = wi.fit_windows(np.asarray(y)[None, :] * 1e3, t=np.asarray(t))
+    assert float(fits.damped_frequency_hz[0]) == pytest.approx(
+        float(w.damped_frequencies_hz[0]), rel=1e-6
+    )
+    assert float(fits.zeta[0]) == pytest.approx(0.04, rel=1e-5)

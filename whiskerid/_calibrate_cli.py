@@ -1,0 +1,230 @@
+"""``whiskerid calibrate``: fit a whisker's κ (f_1), ζ and EI or C to recordings (NOTES §7)."""
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from ._calibrate import (
+    EXCITATIONS,
+    G0,
+    OBSERVABLES,
+    PINS,
+    CalibrationError,
+    Observation,
+    calibrate,
+    read_static_test,
+    release_time,
+)
+from ._io import RecordingError, read_recording
+from ._lsq import SOLVERS
+from ._record import load_record
+
+
+def add_calibrate(sub, command_error) -> None:
+    """Register the ``calibrate`` sub-command."""
+    p = sub.add_parser(
+        "calibrate",
+        help="fit stiffness (f1, kappa, EI or C), damping zeta and nuisances to recordings",
+        description=(
+            "Calibrate a whisker from one or more recordings, fitted jointly: free decay "
+            "(pluck or tap), a sine base excitation at --fb (amplitude --hb known or not), a "
+            "measured base acceleration (--base-col), and optionally a static test "
+            "(--static CSV with force_n, deflection_m). Vibrations alone determine only f1 "
+            "(kappa = EI/(rho a)) and zeta: EI or C is derived from the record's geometry "
+            "(--pin geometry) or material (--pin material), or from the static test. "
+            "Writes the record with fitted values and a [fit] table (values, 1-sigma, "
+            "correlations, status, residuals, data files with SHA-256)."
+        ),
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    p.add_argument("recordings", nargs="+", type=Path, metavar="REC", help="CSV/NPZ/NPY recordings")
+    p.add_argument("--whisker", type=Path, required=True, help="the whisker's record (TOML)")
+    p.add_argument("--out", type=Path, required=True, help="calibrated record to write (TOML)")
+    p.add_argument(
+        "--observable",
+        choices=("auto", *OBSERVABLES),
+        default="auto",
+        help="what the signal is; auto: from the column name or the units metadata",
+    )
+    p.add_argument("--time-col", default="t", help="time column (s)")
+    p.add_argument("--signal-col", help="signal column (the first non-base column by default)")
+    p.add_argument(
+        "--scale", type=float, default=1.0, help="multiply the signal by this (e.g. 9.80665 for g)"
+    )
+    p.add_argument(
+        "--units-g", action="store_true", help="the signal is acceleration in g (scale 9.80665)"
+    )
+    p.add_argument(
+        "--excitation",
+        choices=("auto", *EXCITATIONS),
+        default="auto",
+        help="auto: from the recording's metadata, base if --base-col, else decay",
+    )
+    p.add_argument("--fb", type=float, help="sine excitation frequency (Hz)")
+    p.add_argument("--hb", type=float, help="sine excitation amplitude (m); unknown if absent")
+    p.add_argument("--base-col", help="column with the measured base acceleration (m/s^2)")
+    p.add_argument("--sensor-x", type=float, help="where the signal is read (m from the clamp)")
+    p.add_argument(
+        "--fit-gain",
+        action="store_true",
+        help="fit the sensor gain (always fitted, as gain*amplitude, for voltage/adc "
+        "unless --gain-known)",
+    )
+    p.add_argument("--gain-known", action="store_true", help="take the Hall gain from the record")
+    p.add_argument("--static", type=Path, help="static test CSV: force_n, deflection_m[, x_m]")
+    p.add_argument(
+        "--pin",
+        choices=PINS,
+        default="auto",
+        help="what fixes EI or C without a static test (auto = geometry)",
+    )
+    p.add_argument("--modes", type=int, default=2, help="modes in the model")
+    p.add_argument("--zeta-per-mode", action="store_true", help="one zeta per mode")
+    p.add_argument("--solver", choices=SOLVERS, default="levenberg-marquardt")
+    p.add_argument(
+        "--t-start",
+        type=float,
+        help="fit from this time (s); decay: the release is detected by default",
+    )
+    p.add_argument("--t-end", type=float, help="fit up to this time (s)")
+    p.add_argument("--plot", type=Path, help="save data, fit and residuals as this PNG")
+    p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    p.set_defaults(func=lambda args: _cmd_calibrate(args, command_error))
+
+
+def _observable(args, rec, col: str) -> str:
+    if args.observable != "auto":
+        return args.observable
+    if col in OBSERVABLES:
+        return col
+    units = rec.meta.get("units", "")
+    by_units = {
+        "m": "deflection",
+        "m/s^2": "acceleration",
+        "V": "voltage",
+        "code": "adc",
+        "g": "acceleration",
+    }
+    if units in by_units:
+        return by_units[units]
+    raise CalibrationError(
+        f"{rec.source}: cannot tell what column {col!r} is; "
+        f"give --observable ({', '.join(OBSERVABLES)})"
+    )
+
+
+def load_observation(path: Path, record, args) -> Observation:
+    """Read one recording and turn it into an :class:`Observation` per the CLI flags."""
+    rec = read_recording(path, time_col=args.time_col)
+    signal_cols = [c for c in rec.columns if c != args.base_col]
+    if args.signal_col is not None:
+        col = args.signal_col
+        if col not in rec.columns:
+            raise RecordingError(f"{path}: no column {col!r}; columns are {['t', *rec.columns]}")
+    elif signal_cols:
+        col = signal_cols[0]
+    else:
+        raise RecordingError(f"{path}: no signal column")
+    observable = _observable(args, rec, col)
+    y = (
+        np.asarray(rec.columns[col], dtype=float)
+        * args.scale
+        * (G0 if args.units_g or rec.meta.get("units") == "g" else 1.0)
+    )
+    excitation = args.excitation
+    if excitation == "auto":
+        excitation = "base" if args.base_col else rec.meta.get("excitation", "decay")
+        if excitation not in EXCITATIONS:
+            excitation = "decay"
+    fb = args.fb if args.fb is not None else _meta_float(rec, "fb_hz")
+    hb = args.hb if args.hb is not None else _meta_float(rec, "hb_m")
+    base_acc = None
+    if excitation == "base":
+        if not args.base_col:
+            raise CalibrationError("--excitation base needs --base-col (base acceleration column)")
+        if args.base_col not in rec.columns:
+            raise RecordingError(
+                f"{path}: no column {args.base_col!r}; columns are {['t', *rec.columns]}"
+            )
+        base_acc = rec.columns[args.base_col]
+    if excitation == "sine" and fb is None:
+        raise CalibrationError(f"{path}: a sine excitation needs --fb (or fb_hz metadata)")
+    gain: float | None = 1.0
+    if observable in ("voltage", "adc") and not args.gain_known:
+        gain = None
+    if args.fit_gain:
+        gain = None
+    if gain is not None and observable in ("voltage", "adc"):
+        from ._calibrate import _nominal_gain
+
+        gain = _nominal_gain(record, observable)
+    obs = Observation(
+        t=rec.t,
+        y=y,
+        excitation=excitation,
+        observable=observable,
+        x_m=args.sensor_x,
+        fb_hz=fb,
+        hb_m=hb,
+        base_acc=base_acc,
+        gain=gain,
+        name=path.name,
+        source=str(path),
+    )
+    t_start = args.t_start
+    if t_start is None and excitation == "decay":
+        t_start = release_time(obs.t, obs.y)
+    obs = obs.window(t_start, args.t_end)
+    if obs.t.size < 16:
+        raise RecordingError(f"{path}: only {obs.t.size} samples between --t-start and --t-end")
+    return obs
+
+
+def _meta_float(rec, key):
+    v = rec.meta.get(key)
+    try:
+        return None if v is None else float(v)
+    except ValueError:
+        return None
+
+
+def _cmd_calibrate(args, command_error) -> dict:
+    import sys
+
+    if args.out.exists() and args.out.is_dir():
+        raise command_error(f"--out {args.out} is a folder; give a TOML file")
+    record = load_record(args.whisker)
+    obs = [load_observation(p, record, args) for p in args.recordings]
+    static = read_static_test(args.static) if args.static else None
+    cal = calibrate(
+        record,
+        obs,
+        static=static,
+        n_modes=args.modes,
+        zeta_per_mode=args.zeta_per_mode,
+        pin=args.pin,
+        solver=args.solver,
+    )
+    cal.record.save(args.out)
+    p = cal.params
+    print(
+        f"{cal.status}: f1 = {p['f1_hz']['value']:.5g} ± {p['f1_hz']['std']:.2g} Hz, "
+        f"zeta = {p['zeta']['value']:.4g} ± {p['zeta']['std']:.2g}"
+        + "".join(
+            f", {k} = {p[k]['value']:.4g} ± {p[k]['std']:.2g}" for k in ("EI", "C") if k in p
+        ),
+        file=sys.stderr,
+    )
+    print(f"  {cal.note}", file=sys.stderr)
+    print(f"wrote {args.out}", file=sys.stderr)
+    out = {**cal.to_json(), "out": str(args.out)}
+    if args.plot:
+        from ._calibrate_plot import plot_calibration
+
+        plot_calibration(args.plot, cal)
+        out["plot"] = str(args.plot)
+        print(f"wrote {args.plot}", file=sys.stderr)
+    if not cal.ok:
+        print("warning: the fit did not converge; the record holds its status", file=sys.stderr)
+    return out
