@@ -1,0 +1,204 @@
+"""Online terrain classification on the ADS1115 stream: ``whiskerid stream``.
+
+Samples arrive from :class:`whiskerid.hw.Sampler` (a real ADS1115 over smbus2, or the
+register-level :class:`whiskerid.hw.EmulatedADS1115` fed by the terrain simulator). Each one
+goes into a ring buffer; every ``hop`` seconds the last ``window`` seconds are resampled onto
+the model's uniform grid (timestamps are real, gaps happen) and classified, giving a label,
+a confidence and the window-to-label latency. A :class:`whiskerid.hw.Recorder` can write the
+stream to CSV with periodic fsync, so a crash leaves a readable file. Ctrl-C or SIGTERM stop
+the stream cleanly: files are closed and a summary is printed.
+"""
+
+import signal
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class WindowLabel:
+    """The classification of one window.
+
+    Attributes:
+        t_end_s: Time of the window's last sample (s since the stream started).
+        label: Predicted terrain.
+        confidence: Its probability.
+        latency_s: Time from the window's last sample arriving to its label (s).
+    """
+
+    t_end_s: float
+    label: str
+    confidence: float
+    latency_s: float
+
+
+class OnlineClassifier:
+    """Ring buffer + windowing + classifier, fed one sample at a time.
+
+    Args:
+        model: A trained :class:`whiskerid.ClassifierModel` (``predict_window``,
+            ``window``, ``rate_hz``).
+        hop_s: Time between classified windows (s).
+        speed_mps: Robot speed, for models that use it.
+        clock: Clock used for latencies (seconds, monotonic).
+    """
+
+    def __init__(self, model, *, hop_s: float = 0.5, speed_mps: float | None = None,
+                 clock: Callable[[], float] = time.perf_counter):  # fmt: skip
+        if hop_s <= 0:
+            raise ValueError(f"hop_s = {hop_s!r} must be positive")
+        self.model = model
+        self.window_s = model.window / model.rate_hz
+        self.hop_s = float(hop_s)
+        self.speed = speed_mps
+        self._clock = clock
+        # Room for one window plus slack for jitter and a late hop.
+        size = int(np.ceil((self.window_s + self.hop_s) * model.rate_hz * 1.5)) + 8
+        self._t = np.full(size, -np.inf)
+        self._x = np.zeros(size)
+        self._n = 0
+        self._next_s: float | None = None
+        self._grid = np.arange(model.window) / model.rate_hz
+
+    def push(self, t_s: float, value: float) -> WindowLabel | None:
+        """Add a sample; return a label when a window is due, else None."""
+        arrived = self._clock()
+        i = self._n % self._t.size
+        self._t[i], self._x[i] = t_s, value
+        self._n += 1
+        if self._next_s is None:
+            self._next_s = t_s + self.window_s
+        if t_s < self._next_s:
+            return None
+        self._next_s += self.hop_s * max(1, np.ceil((t_s - self._next_s) / self.hop_s + 1e-12))
+        window = self._window(t_s)
+        label, confidence = self.model.predict_window(window, self.speed)
+        return WindowLabel(t_s, label, float(confidence), self._clock() - arrived)
+
+    def _window(self, t_end: float) -> np.ndarray:
+        order = np.argsort(self._t)
+        t, x = self._t[order], self._x[order]
+        keep = np.isfinite(t)
+        grid = t_end - self.window_s + 1.0 / self.model.rate_hz + self._grid
+        return np.interp(grid, t[keep], x[keep])
+
+
+@dataclass
+class StreamSummary:
+    """What a stream did (printed at the end, and as ``--json``)."""
+
+    duration_s: float = 0.0
+    samples: int = 0
+    windows: list[WindowLabel] = field(default_factory=list)
+    gaps: int = 0
+    overruns: int = 0
+    record: str | None = None
+    stopped_by: str = "duration"
+
+    def to_dict(self, truth: str | None = None) -> dict:
+        """JSON-able summary; with ``truth`` the fraction of windows labelled right."""
+        labels = [w.label for w in self.windows]
+        lat = np.array([w.latency_s for w in self.windows]) * 1e3
+        counts = {lab: labels.count(lab) for lab in sorted(set(labels))}
+        out = {
+            "duration_s": round(self.duration_s, 3),
+            "samples": self.samples,
+            "achieved_rate_hz": round(self.samples / self.duration_s, 3) if self.duration_s else 0,
+            "gaps": self.gaps,
+            "overruns": self.overruns,
+            "windows": len(labels),
+            "label_counts": counts,
+            "majority_label": max(counts, key=counts.get) if counts else None,
+            "latency_ms": {"p50": _pct(lat, 50), "p99": _pct(lat, 99)},
+            "record": self.record,
+            "stopped_by": self.stopped_by,
+        }
+        if truth is not None:
+            out["truth"] = truth
+            out["fraction_correct"] = (
+                round(labels.count(truth) / len(labels), 4) if labels else None
+            )
+        return out
+
+
+def _pct(x: np.ndarray, q: float) -> float | None:
+    return round(float(np.percentile(x, q)), 4) if x.size else None
+
+
+def run_stream(
+    samples: Iterable,
+    online: OnlineClassifier,
+    *,
+    recorder=None,
+    on_label: Callable[[WindowLabel], None] | None = None,
+) -> StreamSummary:
+    """Feed samples (``hw.Sample``: ``t_s``, ``code``, ``volts``) to the classifier.
+
+    The model's channel decides what is fed: ``adc`` codes (default) or volts. SIGTERM is
+    turned into a clean stop, like Ctrl-C.
+    """
+    summary = StreamSummary(record=None if recorder is None else str(recorder.path))
+    use_volts = getattr(online.model, "channel", None) in ("voltage", "volts")
+    previous = signal.getsignal(signal.SIGTERM)
+
+    def _terminate(signum, frame):
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, _terminate)
+    try:
+        for s in samples:
+            summary.samples += 1
+            summary.duration_s = s.t_s
+            if recorder is not None:
+                recorder.write(s.t_s, s.code)
+            label = online.push(s.t_s, s.volts if use_volts else s.code)
+            if label is not None:
+                summary.windows.append(label)
+                if on_label is not None:
+                    on_label(label)
+    except KeyboardInterrupt:
+        summary.stopped_by = "signal"
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        if recorder is not None:
+            recorder.close()
+    return summary
+
+
+def terrain_source(record, terrain: str, speed_mps: float, duration_s: float, *, seed: int = 0,
+                   amplifier: float = 20.0):  # fmt: skip
+    """Hall-sensor voltage ``source(t_s)`` of a whisker driven over a simulated terrain.
+
+    Uses the terrain simulator's base motion and the exact modal model; the emulated ADS1115
+    then does the averaging, clipping and quantisation itself.
+    """
+    import jax.numpy as jnp
+
+    from ._response import base_motion_response, observe
+    from ._sensor import HallSensor
+    from ._terrain import base_acceleration
+    from .hw import source_from_recording
+
+    rng = np.random.default_rng([seed, 7919])
+    t, acc = base_acceleration(terrain, speed_mps, duration_s + 1.0, rng)
+    whisker = record.whisker()
+    state = base_motion_response(whisker, jnp.asarray(t), jnp.asarray(acc), uniform=True)
+    hall = HallSensor(gain_v_per_m=record.hall.gain_v_per_m * amplifier,
+                      offset_v=record.hall.offset_v,
+                      quadratic_v_per_m2=record.hall.quadratic_v_per_m2 * amplifier)  # fmt: skip
+    volts = np.asarray(hall.voltage(observe(whisker, state, "deflection")))
+    keep = t >= 0
+    return source_from_recording(t[keep], volts[keep])
+
+
+def open_recorder(path: Path | None, *, rate_hz: float, meta: dict):
+    """A crash-safe CSV recorder of ADC codes, or None; never overwrites (``-1``, ``-2``...)."""
+    if path is None:
+        return None
+    from .hw import Recorder, unique_path
+
+    return Recorder(unique_path(path), columns=("adc",), rate_hz=rate_hz, units="code",
+                    metadata=meta)  # fmt: skip
