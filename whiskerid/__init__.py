@@ -13,6 +13,10 @@ Public API, re-exported from private modules (SI units throughout):
 * calibration: :func:`calibrate` (κ/f_1, ζ, EI or C with uncertainties from recordings and
   static tests), :class:`Observation`, :class:`StaticTest`, :class:`Calibration`, and
   :func:`fit_windows` (batched per-window damped-oscillation fits);
+* terrain classification: :func:`synthesize_dataset` (simulated terrains),
+  :func:`compute_features` / :class:`FeatureSpec`, :func:`load_dataset`,
+  :func:`train_classifier`, :func:`evaluate_classifier`, :func:`paper_protocol`, and
+  :class:`ClassifierModel` (``predict_window`` for online use);
 * signals and files: :func:`dominant_peaks`, :class:`Recording`, :func:`read_recording`,
   :func:`write_csv`.
 
@@ -34,6 +38,18 @@ from ._calibrate import WindowFits as WindowFits
 from ._calibrate import calibrate as calibrate
 from ._calibrate import fit_windows as fit_windows
 from ._calibrate import read_static_test as read_static_test
+from ._classify import ClassifierModel as ClassifierModel
+from ._classify import ModelError as ModelError
+from ._classify import WindowSet as WindowSet
+from ._classify import evaluate_classifier as evaluate_classifier
+from ._classify import load_dataset as load_dataset
+from ._classify import paper_protocol as paper_protocol
+from ._classify import split_by_recording as split_by_recording
+from ._classify import train_classifier as train_classifier
+from ._features import FeatureSpec as FeatureSpec
+from ._features import band_energies as band_energies
+from ._features import compute_features as compute_features
+from ._features import spectral_peaks as spectral_peaks
 from ._io import Recording as Recording
 from ._io import RecordingError as RecordingError
 from ._io import check_samples as check_samples
@@ -67,6 +83,12 @@ from ._signal import find_peaks as find_peaks
 from ._signal import resample_uniform as resample_uniform
 from ._simulate import BaseMotion as BaseMotion
 from ._simulate import simulate as simulate
+from ._terrain import SPEEDS_MPS as SPEEDS_MPS
+from ._terrain import TERRAIN_FAMILIES as TERRAIN_FAMILIES
+from ._terrain import TERRAINS as TERRAINS
+from ._terrain import synthesize_dataset as synthesize_dataset
+from ._terrain import synthesize_runs as synthesize_runs
+from ._terrain import wheel_filter as wheel_filter
 from ._whisker import CoilSpring as CoilSpring
 from ._whisker import UniformBeam as UniformBeam
 from ._whisker import Whisker as Whisker

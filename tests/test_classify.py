@@ -1,0 +1,110 @@
+"""MLP, model files, evaluation and the classification CLI on a tiny dataset."""
+
+import json
+
+import jax
+import numpy as np
+import pytest
+
+import whiskerid as wi
+from whiskerid._classify import confusion_matrix, format_confusion, grouped_split
+from whiskerid._cli import main
+from whiskerid._mlp import TrainConfig, train_mlp
+
+FAST = TrainConfig(hidden=(32, 16), max_epochs=60, patience=20, batch_size=64)
+
+
+def test_mlp_learns_a_separable_toy_problem():
+    rng = np.random.default_rng(0)
+    centres = rng.standard_normal((3, 4)) * 3
+    y = rng.integers(0, 3, 600)
+    x = centres[y] + rng.standard_normal((600, 4))
+    res = train_mlp(x[:450], y[:450], x[450:], y[450:], 3, FAST)
+    assert res.val_accuracy > 0.95
+    res2 = train_mlp(x[:450], y[:450], x[450:], y[450:], 3, FAST)
+    leaves = zip(jax.tree_util.tree_leaves(res.model), jax.tree_util.tree_leaves(res2.model),
+                 strict=True)  # fmt: skip
+    assert all(np.array_equal(a, b) for a, b in leaves)  # seeded: identical
+
+
+def _toy_windows(n_rec=8, per=10):
+    """Two classes: a 20 Hz or a 60 Hz tone in noise, one recording per row."""
+    rng = np.random.default_rng(1)
+    t = np.arange(200) / 200.0
+    wins, labels, recs = [], [], []
+    for r in range(n_rec):
+        f = 20.0 if r % 2 == 0 else 60.0
+        for _ in range(per):
+            wins.append(np.sin(2 * np.pi * f * t + rng.uniform(0, 6)) + rng.standard_normal(200))
+            labels.append(r % 2)
+            recs.append(r)
+    n = len(labels)
+    return wi.WindowSet(np.array(wins), np.array(labels), ("low", "high"), np.array(recs),
+                        np.full(n, np.nan), [f"r{i}" for i in range(n_rec)], 200.0)  # fmt: skip
+
+
+def test_split_by_recording_keeps_recordings_whole():
+    ws = _toy_windows()
+    train, test = wi.split_by_recording(ws, 0.25, seed=0)
+    assert not set(train.recording) & set(test.recording)
+    assert set(test.labels) == {0, 1} and len(train) + len(test) == len(ws)
+    assert grouped_split(ws, 0.25, 0).sum() == len(test)
+
+
+def test_train_save_load_round_trip_and_refusals(tmp_path):
+    ws = _toy_windows()
+    model = wi.train_classifier(ws, config=FAST)
+    res = wi.evaluate_classifier(model, ws)
+    assert res["accuracy"] > 0.9 and set(res["per_class"]) == {"low", "high"}
+    path = model.save(tmp_path / "m")
+    loaded = wi.ClassifierModel.load(path)
+    np.testing.assert_allclose(loaded.predict_proba(ws.windows), model.predict_proba(ws.windows),
+                               rtol=1e-5, atol=1e-6)  # fmt: skip
+    label, conf = loaded.predict_window(ws.windows[0])
+    assert label in ("low", "high") and 0.5 <= conf <= 1.0
+    head = json.loads((path / "model.json").read_text())
+    assert head["labels"] == ["low", "high"] and head["window"] == 200
+
+    (path / "model.json").write_text(json.dumps({**head, "format": "whiskerid.classifier/99"}))
+    with pytest.raises(wi.ModelError, match="incompatible"):
+        wi.ClassifierModel.load(path)
+    (path / "model.json").write_text("{not json")
+    with pytest.raises(wi.ModelError, match="corrupt"):
+        wi.ClassifierModel.load(path)
+    (path / "model.json").write_text(json.dumps(head))
+    (path / "weights.npz").write_bytes(b"garbage")
+    with pytest.raises(wi.ModelError, match="corrupt model weights"):
+        wi.ClassifierModel.load(path)
+    np.savez(path / "weights.npz", W0=np.zeros((3, 3)))
+    with pytest.raises(wi.ModelError):
+        wi.ClassifierModel.load(path)
+
+
+def test_confusion_matrix_and_text():
+    c = confusion_matrix([0, 0, 1, 1, 1], [0, 1, 1, 1, 0], 2)
+    assert c.tolist() == [[1, 1], [1, 2]]
+    text = format_confusion(c, ["a", "b"])
+    assert "0.500" in text and "0.667" in text
+
+
+@pytest.mark.slow
+def test_cli_synth_train_evaluate_classify(tmp_path, capsys):
+    ds, model = tmp_path / "ds", tmp_path / "model"
+    args = ["--terrains", "brick", "sand", "--speeds", "0.2", "--runs", "2", "--duration", "6"]
+    assert main(["dataset", "synth", "--out", str(ds), *args]) == 0
+    assert len(list(ds.glob("*/*.csv"))) == 4
+    assert main(["train", str(ds), "--out", str(model), "--hidden", "16", "16",
+                 "--max-epochs", "40", "--json"]) == 0  # fmt: skip
+    out = json.loads(capsys.readouterr().out)
+    assert out["labels"] == ["brick", "sand"] and 20 <= out["windows"] <= 24
+    assert main(["evaluate", str(model), str(ds), "--json", "--plot", str(tmp_path / "c.png")]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert {"accuracy", "per_class", "confusion", "labels"} <= set(res)
+    assert (tmp_path / "c.png").stat().st_size > 1000
+    rec = next((ds / "sand").glob("*.csv"))
+    assert main(["classify", str(model), str(rec), "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["label"] in ("brick", "sand") and len(res["windows"]) in (5, 6)
+    (model / "model.json").write_text("{}")
+    assert main(["classify", str(model), str(rec)]) == 2
+    assert "incompatible model format" in capsys.readouterr().err

@@ -1,0 +1,64 @@
+"""Features: sub-bin peaks, band energies, shapes under jit/vmap, both pipelines."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import whiskerid as wi
+from whiskerid._features import fit_resonance, power_spectrum
+
+
+def test_spectral_peaks_sub_bin_accuracy_and_order():
+    t = np.arange(200) / 200.0
+    x = np.sin(2 * np.pi * 37.3 * t) + 0.3 * np.sin(2 * np.pi * 60.6 * t)
+    _f, p = power_spectrum(jnp.asarray(x), 200.0)
+    amps = jnp.concatenate([jnp.zeros(1), jnp.sqrt(p)])
+    freq, amp, width = wi.spectral_peaks(amps, 1.0, 3)
+    assert abs(float(freq[0]) - 37.3) < 0.05 and abs(float(freq[1]) - 60.6) < 0.05
+    assert amp[0] > 2.5 * amp[1]
+    assert 0.8 < float(width[0]) < 3.0  # Hann main lobe: about 1.4 bins at half power
+
+
+def test_band_energies_sum_to_one_and_locate_a_tone():
+    t = np.arange(400) / 400.0
+    f, p = power_spectrum(jnp.asarray(np.sin(2 * np.pi * 72.0 * t)), 400.0)
+    e = wi.band_energies(f, p, jnp.linspace(0, 200, 9))
+    assert abs(float(e.sum()) - 1) < 1e-12
+    assert int(jnp.argmax(e)) == 2 and float(e[2]) > 0.95  # 72 Hz lies in [50, 75)
+
+
+def test_resonance_fit_finds_a_damped_mode():
+    """Within half the half-power bandwidth (2ζf = 3.7 Hz) from one noisy periodogram."""
+    rng = np.random.default_rng(0)
+    fs, n, fn, zeta = 200.0, 2000, 46.0, 0.04
+    wn, wd = 2 * np.pi * fn, 2 * np.pi * fn * np.sqrt(1 - zeta**2)
+    h = np.exp(-zeta * wn * np.arange(400) / fs) * np.sin(wd * np.arange(400) / fs)
+    x = np.convolve(rng.standard_normal(n), h)[:n]
+    f, p = power_spectrum(jnp.asarray(x), fs)
+    fd, z, _, _, ok = fit_resonance(f, p, 45.0)
+    assert bool(ok) and abs(float(fd) - 46.0) < 2.0 and 0.01 < float(z) < 0.12
+
+
+@pytest.mark.parametrize("rate, window, use_speed", [(200.0, 200, True), (100.0, 150, False)])
+def test_fitted_features_shapes_any_rate_and_window(rate, window, use_speed):
+    spec = wi.FeatureSpec(rate_hz=rate, window=window, use_speed=use_speed)
+    x = np.random.default_rng(1).standard_normal((5, window))
+    feats = wi.compute_features(spec, x, np.full(5, 0.2) if use_speed else None)
+    assert feats.shape == (5, spec.n_features) and np.isfinite(np.asarray(feats)).all()
+    # Standardised quantities ignore gain and offset; the log RMS moves by log(gain).
+    feats2 = wi.compute_features(spec, 10 * x + 3, np.full(5, 0.2) if use_speed else None)
+    np.testing.assert_allclose(feats2[:, 0] - feats[:, 0], np.log(10), atol=1e-9)
+    np.testing.assert_allclose(feats2[:, 6:20], feats[:, 6:20], atol=1e-6)
+
+
+def test_paper_features_are_fft_magnitudes_of_the_standardised_window():
+    spec = wi.FeatureSpec(kind="paper")
+    x = np.random.default_rng(2).standard_normal((3, 200))
+    z = (x - x.mean(1, keepdims=True)) / x.std(1, keepdims=True)
+    np.testing.assert_allclose(wi.compute_features(spec, 5 * x), np.abs(np.fft.fft(z)), atol=1e-9)
+    assert spec.n_features == 200
+
+
+def test_speed_features_need_a_speed():
+    with pytest.raises(ValueError, match="speed"):
+        wi.compute_features(wi.FeatureSpec(use_speed=True), np.zeros((1, 200)))

@@ -1,0 +1,60 @@
+"""Terrain simulator: determinism, wheel filter, speed moves texture frequency."""
+
+import numpy as np
+
+import whiskerid as wi
+from whiskerid._terrain import RunSpec, base_acceleration, iso8608_roughness
+
+
+def test_synthesis_is_deterministic_by_seed_and_independent_of_the_batch():
+    a = wi.synthesize_runs([RunSpec("brick", 0.2, 0), RunSpec("sand", 0.1, 1)], duration_s=2.0)
+    b = wi.synthesize_runs([RunSpec("sand", 0.1, 1)], duration_s=2.0)
+    c = wi.synthesize_runs([RunSpec("sand", 0.1, 1)], duration_s=2.0, seed=1)
+    np.testing.assert_array_equal(a[1].signal(), b[0].signal())
+    np.testing.assert_array_equal(a[1].t, b[0].t)
+    assert not np.array_equal(b[0].signal(), c[0].signal())
+    rec = a[0]
+    assert rec.t.size == 400 and rec.meta["terrain"] == "brick" and rec.meta["speed_mps"] == "0.2"
+    assert np.all(np.diff(rec.t) > 0) and abs(np.median(np.diff(rec.t)) - 0.005) < 1e-4
+    assert rec.signal().dtype.kind == "i" and rec.signal().std() > 3  # codes that vary
+
+
+def test_wheel_filter_passes_long_waves_and_removes_short_ones():
+    dx = 5e-4
+    x = np.arange(8000) * dx
+    for wavelength, lo, hi in ((1.0, 0.97, 1.01), (0.004, 0.0, 0.1)):
+        z = 1e-3 * np.sin(2 * np.pi * x / wavelength)
+        zw = wi.wheel_filter(z, dx, patch_m=0.004)[500:-500]
+        ratio = (zw.max() - zw.min()) / 2e-3
+        assert lo <= ratio <= hi, (wavelength, ratio)
+
+
+def test_rigid_wheel_bridges_a_narrow_joint():
+    dx = 5e-4
+    z = np.zeros(400)
+    z[195:205] = -3e-3  # 5 mm wide, 3 mm deep joint
+    zw = wi.wheel_filter(z, dx, patch_m=dx)
+    drop = 0.035 - np.sqrt(0.035**2 - 0.0025**2)  # sagitta of the 70 mm wheel over 5 mm
+    assert abs(zw.min() + drop) < 2e-5 and zw.min() > -1e-3
+
+
+def test_roughness_variance_matches_the_psd():
+    rng = np.random.default_rng(0)
+    dx, g0, w = 5e-4, 1e-5, 2.0
+    z = np.stack([iso8608_roughness(20000, dx, g0, w, rng) for _ in range(20)])
+    n = np.fft.rfftfreq(20000, dx)
+    keep = n >= 0.5
+    expected = np.sum(g0 * (n[keep] / 0.1) ** -w) * n[1]  # Σ G_d(n_k) Δn
+    assert abs(z.var() / expected - 1) < 0.1
+
+
+def test_speed_moves_the_texture_frequency():
+    """Sand ripples of ~80 mm: f = v/λ moves from 1.25 Hz to 3.75 Hz."""
+    peaks = []
+    for v in (0.1, 0.3):
+        t, acc = base_acceleration("sand", v, 20.0, np.random.default_rng(3), vary_run=False)
+        f = np.fft.rfftfreq(t.size, t[1] - t[0])
+        disp = np.abs(np.fft.rfft(acc)) / np.maximum((2 * np.pi * f) ** 2, 1e-9)
+        band = (f > 0.5) & (f < 8)
+        peaks.append(f[band][np.argmax(disp[band])])
+    assert 0.8 < peaks[0] < 1.8 and 2.6 < peaks[1] < 5.0, peaks

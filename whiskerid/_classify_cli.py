@@ -1,0 +1,179 @@
+"""``whiskerid dataset synth``, ``train``, ``evaluate`` and ``classify`` (NOTES §7)."""
+
+import argparse
+import sys
+from pathlib import Path
+
+from ._features import FEATURE_KINDS
+
+_FMT = argparse.ArgumentDefaultsHelpFormatter
+
+
+def _say(*parts) -> None:
+    print(*parts, file=sys.stderr)
+
+
+def add_classify_commands(sub, command_error) -> None:
+    """Register ``dataset``, ``train``, ``evaluate`` and ``classify``."""
+    global CommandError
+    CommandError = command_error
+
+    p = sub.add_parser("dataset", help="make labelled datasets (synthetic terrains)",
+                       formatter_class=_FMT)  # fmt: skip
+    dsub = p.add_subparsers(dest="dataset_command", required=True, metavar="ACTION")
+    s = dsub.add_parser(
+        "synth",
+        help="synthesise whisker recordings of the paper's 7 terrains at several speeds",
+        description=(
+            "Simulate a wheeled robot (70 mm wheels) on random terrain profiles (ISO 8608 "
+            "roughness, joints, pile, ripples, bumps; ground compliance), the whisker's exact "
+            "modal response to the body motion, the Hall sensor and the ADS1115 at 200 Hz. "
+            "Writes OUT/<terrain>/<terrain>_v<speed>_r<run>.csv with metadata (terrain, "
+            "speed_mps, rate_hz, whisker). Deterministic for a seed."
+        ),
+        formatter_class=_FMT,
+    )
+    from ._terrain import SPEEDS_MPS, TERRAINS
+
+    s.add_argument("--out", type=Path, required=True, help="dataset folder to write")
+    s.add_argument("--whisker", type=Path, help="whisker record (TOML); the paper's by default")
+    s.add_argument("--terrains", nargs="+", default=list(TERRAINS), metavar="T",
+                   help=f"terrains among {', '.join(TERRAINS)}")  # fmt: skip
+    s.add_argument("--speeds", nargs="+", type=float, default=list(SPEEDS_MPS), metavar="V",
+                   help="nominal robot speeds (m/s)")  # fmt: skip
+    s.add_argument("--runs", type=int, default=4, help="recordings per terrain and speed")
+    s.add_argument("--duration", type=float, default=30.0, help="length of each recording (s)")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    s.set_defaults(func=_cmd_synth)
+
+    t = sub.add_parser(
+        "train",
+        help="train a terrain classifier on a dataset folder",
+        description=(
+            "Train an MLP terrain classifier on DATASET (ROOT/<label>/<recording>.csv). "
+            "Recordings are resampled to the rate in their metadata or timestamps and cut "
+            "into windows. --features paper: standardise + |FFT| and the paper's 7-layer "
+            "network; fitted: spectral peaks with sub-bin interpolation, band energies, a "
+            "per-window resonance fit, time-domain shape, and speed-normalised forms when "
+            "every recording has speed_mps. Early stopping on held-out recordings."
+        ),
+        formatter_class=_FMT,
+    )
+    t.add_argument("dataset", type=Path)
+    t.add_argument("--out", type=Path, required=True, help="model folder to write")
+    t.add_argument("--features", choices=FEATURE_KINDS, default="fitted")
+    t.add_argument("--channel", help="column to classify (the first signal column by default)")
+    t.add_argument("--window", type=float, default=1.0, help="window length (s)")
+    t.add_argument("--hop", type=float, help="window step (s); the window length by default")
+    t.add_argument(
+        "--rate", type=float, help="resample to this rate (Hz); from the data by default"
+    )
+    t.add_argument("--no-speed", action="store_true", help="do not use speed_mps metadata")
+    t.add_argument("--hidden", type=int, nargs="+", help="hidden layer sizes")
+    t.add_argument("--max-epochs", type=int, default=300)
+    t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    t.set_defaults(func=_cmd_train)
+
+    e = sub.add_parser(
+        "evaluate",
+        help="score a classifier on a labelled dataset",
+        description="Accuracy, per-class accuracy and confusion matrix of MODEL on DATASET.",
+        formatter_class=_FMT,
+    )
+    e.add_argument("model", type=Path)
+    e.add_argument("dataset", type=Path)
+    e.add_argument("--plot", type=Path, help="save the confusion matrix as this PNG")
+    e.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    e.set_defaults(func=_cmd_evaluate)
+
+    c = sub.add_parser(
+        "classify",
+        help="label the terrain of a recording, per window and overall",
+        description="Classify every window of REC and the whole recording (mean probability).",
+        formatter_class=_FMT,
+    )
+    c.add_argument("model", type=Path)
+    c.add_argument("recording", type=Path)
+    c.add_argument("--speed", type=float, help="robot speed (m/s); from the metadata by default")
+    c.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    c.set_defaults(func=_cmd_classify)
+
+
+def _cmd_synth(args) -> dict:
+    from ._record import load_record, paper_record
+    from ._terrain import synthesize_dataset
+
+    if args.runs < 1 or args.duration <= 0:
+        raise CommandError("--runs must be >= 1 and --duration > 0")
+    record = paper_record() if args.whisker is None else load_record(args.whisker)
+    paths = synthesize_dataset(args.out, record=record, terrains=tuple(args.terrains),
+                               speeds=tuple(args.speeds), runs=args.runs,
+                               duration_s=args.duration, seed=args.seed)  # fmt: skip
+    _say(f"wrote {len(paths)} recordings to {args.out}")
+    return {"out": str(args.out), "recordings": len(paths), "terrains": args.terrains,
+            "speeds_mps": args.speeds, "runs": args.runs, "duration_s": args.duration}  # fmt: skip
+
+
+def _cmd_train(args) -> dict:
+    from ._classify import load_dataset, train_classifier
+    from ._mlp import PAPER_HIDDEN, TrainConfig
+
+    if args.window <= 0:
+        raise CommandError("--window must be positive")
+    ws = load_dataset(args.dataset, channel=args.channel, window_s=args.window,
+                      hop_s=args.hop, rate_hz=args.rate)  # fmt: skip
+    hidden = tuple(args.hidden) if args.hidden else (
+        PAPER_HIDDEN if args.features == "paper" else TrainConfig().hidden)  # fmt: skip
+    config = TrainConfig(hidden=hidden, seed=args.seed, max_epochs=args.max_epochs)
+    hop = None if args.hop is None else round(args.hop * ws.rate_hz)
+    model = train_classifier(ws, features=args.features, config=config,
+                             use_speed=False if args.no_speed else None,
+                             channel=args.channel, hop=hop)  # fmt: skip
+    model.save(args.out)
+    info = model.info
+    _say(f"trained on {len(ws)} windows of {ws.windows.shape[1]} samples at {ws.rate_hz:g} Hz, "
+         f"{len(ws.label_names)} classes; validation accuracy {info['val_accuracy']:.3f}; "
+         f"wrote {args.out}")  # fmt: skip
+    return {"out": str(args.out), "features": args.features, "labels": list(model.labels),
+            "rate_hz": ws.rate_hz, "window": model.window, "windows": len(ws),
+            "use_speed": model.needs_speed, **info}  # fmt: skip
+
+
+def _load_model(path):
+    from ._classify import ClassifierModel
+
+    return ClassifierModel.load(path)
+
+
+def _cmd_evaluate(args) -> dict:
+    from ._classify import evaluate, format_confusion, load_dataset, plot_confusion
+
+    model = _load_model(args.model)
+    ws = load_dataset(args.dataset, channel=model.channel, window_s=model.window / model.rate_hz,
+                      rate_hz=model.rate_hz, labels=model.labels)  # fmt: skip
+    if model.needs_speed and not ws.has_speed:
+        raise CommandError(f"{args.model} needs speed_mps on every recording of {args.dataset}")
+    res = evaluate(model, ws)
+    _say(format_confusion(res["confusion"], res["labels"]))
+    _say(f"accuracy {res['accuracy']:.4f} on {res['n_windows']} windows")
+    if args.plot:
+        plot_confusion(args.plot, res["confusion"], res["labels"])
+        res["plot"] = str(args.plot)
+        _say(f"wrote {args.plot}")
+    return res
+
+
+def _cmd_classify(args) -> dict:
+    from ._io import read_recording
+
+    model = _load_model(args.model)
+    rec = read_recording(args.recording)
+    res = model.classify_recording(rec, speed=args.speed)
+    _say(f"{args.recording}: {res['label']} (confidence {res['confidence']:.3f}, "
+         f"{len(res['windows'])} windows)")  # fmt: skip
+    return {"recording": str(args.recording), **res}
+
+
+CommandError = ValueError  # replaced by the CLI's own class on registration

@@ -1,0 +1,298 @@
+"""Per-window features for terrain classification (JAX: jitted, vmapped over windows).
+
+Two pipelines, both for any sample rate and window length (a :class:`FeatureSpec` holds
+them, and goes into model files):
+
+* ``paper``: the paper's (Section IV): standardise the window (zero mean, unit standard
+  deviation), then the magnitude of its full FFT: ``window`` inputs (200 at 200 Hz, 1 s).
+* ``fitted``: a short vector of physically meaningful quantities, made comparable across
+  speeds and amplitudes:
+
+  - amplitude and shape in time: log RMS, skewness, log kurtosis and log crest factor (joint
+    and bump impacts are spiky), zero-crossing rate, RMS of the first difference;
+  - spectrum of the standardised, Hann-windowed window: relative energies in ``n_bands``
+    equal bands up to Nyquist (they sum to one), spectral centroid and flatness;
+  - the dominant spectral peak and its side peaks (the paper's "dominant frequency
+    sandwiched by two less dominant components", NOTES §2): frequency with parabolic
+    sub-bin interpolation of the log amplitude, relative amplitude and half-power width;
+  - fitted modal quantities: a single-mode resonance
+    ``P(f) = A²/((1 − r²)² + (2ζr)²) + c``, ``r = f/f_n``, fitted to each window's power
+    spectrum by Levenberg–Marquardt (``_lsq.least_squares``, never raising; vmapped over
+    windows): damped frequency ``f_n√(1 − ζ²)``, ``ζ``, gain × amplitude ``A`` (times the
+    window RMS) and the floor-to-peak ratio, plus the fit's ``ok`` flag;
+  - when the speed ``v`` is known (``use_speed``): a texture of wavelength ``λ`` appears at
+    ``f = v/λ`` (NOTES §5), so the spectrum is also summarised on the *spatial* frequency
+    ``n = f/v`` (cycles/m): relative energies in log-spaced bands over
+    ``[spatial_lo, spatial_hi]``, the dominant peak and the centroid as log spatial
+    frequencies, and the RMS divided by ``v²`` (base acceleration for a given profile
+    grows as ``v²``).
+
+Frequencies are given as fractions of Nyquist, so a spec is meaningful at its own rate only;
+model files record the rate and recordings are resampled to it.
+"""
+
+import functools
+from dataclasses import asdict, dataclass
+from typing import Literal
+
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from ._lsq import least_squares, to_interval
+
+FeatureKind = Literal["fitted", "paper"]
+FEATURE_KINDS = ("fitted", "paper")
+_EPS = 1e-12
+
+
+@dataclass(frozen=True)
+class FeatureSpec:
+    """What features to compute, for windows of ``window`` samples at ``rate_hz``.
+
+    Attributes:
+        kind: ``fitted`` or ``paper``.
+        rate_hz: Sample rate of the windows (Hz).
+        window: Samples per window.
+        n_bands: Equal-width bands from 0 to Nyquist (fitted).
+        n_peaks: Spectral peaks reported (dominant first) (fitted).
+        modal_fit: Fit a resonance per window (fitted).
+        use_speed: Add speed-normalised features; windows then need a speed (fitted).
+        n_spatial_bands: Log-spaced spatial-frequency bands (fitted, with speed).
+        spatial_lo: Lowest spatial frequency (cycles/m).
+        spatial_hi: Highest spatial frequency (cycles/m).
+    """
+
+    kind: FeatureKind = "fitted"
+    rate_hz: float = 200.0
+    window: int = 200
+    n_bands: int = 16
+    n_peaks: int = 3
+    modal_fit: bool = True
+    use_speed: bool = False
+    n_spatial_bands: int = 10
+    spatial_lo: float = 10.0
+    spatial_hi: float = 330.0
+
+    def __post_init__(self):
+        if self.kind not in FEATURE_KINDS:
+            raise ValueError(
+                f"features must be one of {', '.join(FEATURE_KINDS)}; got {self.kind!r}"
+            )
+        if self.window < 16:
+            raise ValueError(f"a window needs at least 16 samples, not {self.window}")
+        if not self.rate_hz > 0:
+            raise ValueError(f"rate_hz must be positive, not {self.rate_hz!r}")
+        if not 0 < self.spatial_lo < self.spatial_hi:
+            raise ValueError("need 0 < spatial_lo < spatial_hi")
+
+    @property
+    def n_features(self) -> int:
+        """Length of the feature vector."""
+        if self.kind == "paper":
+            return self.window
+        n = 6 + self.n_bands + 2 + 3 * self.n_peaks + (5 if self.modal_fit else 0)
+        return n + (self.n_spatial_bands + 3 if self.use_speed else 0)
+
+    def to_dict(self) -> dict:
+        """JSON-able form (model files)."""
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "FeatureSpec":
+        """Inverse of :meth:`to_dict`; unknown keys are refused."""
+        known = set(cls.__dataclass_fields__)
+        extra = set(d) - known
+        if extra:
+            raise ValueError(f"unknown feature settings {sorted(extra)}")
+        return cls(**d)
+
+
+def standardise(x: Float[Array, " window"]) -> Float[Array, " window"]:
+    """Zero mean, unit standard deviation (a constant window stays at zero)."""
+    x = x - jnp.mean(x)
+    return x / jnp.maximum(jnp.std(x), _EPS)
+
+
+def paper_features(x: Float[Array, " window"]) -> Float[Array, " window"]:
+    """The paper's input: ``|FFT|`` of the standardised window (all ``window`` bins)."""
+    return jnp.abs(jnp.fft.fft(standardise(x)))
+
+
+def power_spectrum(x: Float[Array, " window"], rate_hz: float):
+    """One-sided power of the standardised, Hann-windowed window; DC dropped.
+
+    Returns:
+        ``(freqs_hz, power)``, bins 1 … ``window // 2``.
+    """
+    n = x.shape[-1]
+    w = jnp.hanning(n)
+    p = jnp.abs(jnp.fft.rfft(standardise(x) * w)) ** 2 / jnp.sum(w**2)
+    f = jnp.fft.rfftfreq(n, 1.0 / rate_hz)
+    return f[1:], p[1:]
+
+
+def band_energies(
+    freqs: Float[Array, " bins"], power: Float[Array, " bins"], edges: Float[Array, " edges"]
+) -> Float[Array, " bands"]:
+    """Fraction of the power in each band ``[edges[k], edges[k+1])`` (the last one closed).
+
+    The fractions sum to one when the edges cover every bin.
+    """
+    inside = (freqs[None, :] >= edges[:-1, None]) & (freqs[None, :] < edges[1:, None])
+    inside = inside.at[-1].set(inside[-1] | (freqs == edges[-1]))
+    e = inside @ power
+    total = jnp.sum(jnp.where(inside.any(axis=0), power, 0.0))
+    return e / jnp.maximum(total, _EPS)
+
+
+def spectral_peaks(amps: Float[Array, " bins"], df: float, n: int = 3):
+    """The ``n`` largest local maxima with parabolic interpolation of the log amplitude.
+
+    Args:
+        amps: Amplitudes of bins ``0 … m-1`` (bin ``k`` at ``k·df``).
+        df: Bin spacing (Hz).
+        n: Peaks returned (fewer maxima: the remaining ones have zero amplitude).
+
+    Returns:
+        ``(freq_hz, amplitude, width_hz)``, each shape ``(n,)``, dominant first. The width is
+        the full width at half power of the fitted parabola.
+    """
+    y = jnp.log(jnp.maximum(amps, _EPS))
+    inner = jnp.arange(1, amps.shape[0] - 1)
+    is_max = (y[inner] > y[inner - 1]) & (y[inner] >= y[inner + 1])
+    score = jnp.where(is_max, y[inner], -jnp.inf)
+    top, idx = jax.lax.top_k(score, n)
+    k = inner[idx]
+    y0, y1, y2 = y[k - 1], y[k], y[k + 1]
+    curv = y0 - 2 * y1 + y2  # negative at a maximum
+    safe = jnp.where(curv < 0, curv, -_EPS)
+    shift = jnp.clip(0.5 * (y0 - y2) / safe, -0.5, 0.5)
+    peak_y = y1 - 0.25 * (y0 - y2) * shift
+    # Half power in amplitude is ln(√2) below the top: (c/2) Δ² = −ln √2 on each side.
+    width = 2 * jnp.sqrt(jnp.log(2.0) / jnp.maximum(-safe, _EPS)) * df
+    valid = jnp.isfinite(top)
+    freq = jnp.where(valid, (k + shift) * df, 0.0)
+    return freq, jnp.where(valid, jnp.exp(peak_y), 0.0), jnp.where(valid, width, 0.0)
+
+
+def _resonance(params, freqs):
+    u_f, u_z, log_a2, log_c, f_lo, f_hi = params
+    fn = to_interval(u_f, f_lo, f_hi)
+    zeta = to_interval(u_z, 0.005, 0.5)
+    r = freqs / fn
+    return jnp.exp(log_a2) / ((1 - r**2) ** 2 + (2 * zeta * r) ** 2) + jnp.exp(log_c), fn, zeta
+
+
+def fit_resonance(freqs: Float[Array, " bins"], power: Float[Array, " bins"], f0: float):
+    """Fit ``A²/((1 − r²)² + (2ζr)²) + c`` to a power spectrum in the log domain.
+
+    Starts at ``f_n = f0`` (the dominant peak), ``ζ = 0.05``. Never raises: check ``ok``.
+
+    Returns:
+        ``(damped_freq_hz, zeta, amplitude A, floor c, ok)``.
+    """
+    f_lo, f_hi = freqs[0], freqs[-1]
+    smooth = jnp.convolve(power, jnp.ones(3) / 3, mode="same")
+    target = jnp.log(smooth + 1e-6)
+    f0 = jnp.clip(f0, f_lo + 0.02 * (f_hi - f_lo), f_hi - 0.02 * (f_hi - f_lo))
+    p_f = (f0 - f_lo) / (f_hi - f_lo)
+    y0 = jnp.stack(
+        [jnp.log(p_f) - jnp.log1p(-p_f), jnp.log(0.045 / 0.455), jnp.log(jnp.max(smooth) * 0.01),
+         jnp.log(jnp.median(smooth) + 1e-6)]
+    )  # fmt: skip
+
+    def residual(y, args):
+        model, _, _ = _resonance((*y, f_lo, f_hi), freqs)
+        return jnp.log(model + 1e-6) - target
+
+    fit = least_squares(residual, y0, max_steps=48)
+    _, fn, zeta = _resonance((*fit.value, f_lo, f_hi), freqs)
+    return (
+        fn * jnp.sqrt(1 - zeta**2),
+        zeta,
+        jnp.exp(0.5 * fit.value[2]),
+        jnp.exp(fit.value[3]),
+        fit.ok,
+    )
+
+
+def fitted_features(
+    spec: FeatureSpec, x: Float[Array, " window"], speed_mps
+) -> Float[Array, " features"]:
+    """The ``fitted`` feature vector of one window (see the module docstring)."""
+    nyq = spec.rate_hz / 2
+    x0 = x - jnp.mean(x)
+    rms = jnp.maximum(jnp.std(x0), _EPS)
+    z = x0 / rms
+    log_rms = jnp.log(rms)
+    time_feats = [
+        log_rms,
+        jnp.mean(z**3),
+        jnp.log(jnp.mean(z**4)),
+        jnp.log(jnp.max(jnp.abs(z)) + _EPS),
+        jnp.mean(jnp.signbit(z[1:]) != jnp.signbit(z[:-1])),
+        jnp.std(jnp.diff(z)),
+    ]
+    freqs, power = power_spectrum(x, spec.rate_hz)
+    edges = jnp.linspace(0.0, nyq, spec.n_bands + 1).at[-1].set(nyq)
+    bands = jnp.log(band_energies(freqs, power, edges) + 1e-4)
+    total = jnp.maximum(jnp.sum(power), _EPS)
+    centroid = jnp.sum(freqs * power) / total
+    flatness = jnp.mean(jnp.log(power + _EPS)) - jnp.log(jnp.mean(power) + _EPS)
+    df = spec.rate_hz / spec.window
+    amps = jnp.concatenate([jnp.zeros(1), jnp.sqrt(power)])  # bin k at k·df again
+    pf, pa, pw = spectral_peaks(amps, df, spec.n_peaks)
+    peak_feats = jnp.concatenate([pf / nyq, jnp.log(pa / jnp.sqrt(total) + 1e-6), pw / nyq])
+    parts = [jnp.stack(time_feats), bands, jnp.stack([centroid / nyq, flatness]), peak_feats]
+    if spec.modal_fit:
+        fd, zeta, amp, floor, ok = fit_resonance(freqs, power, pf[0])
+        parts.append(
+            jnp.stack([fd / nyq, zeta, jnp.log(amp + _EPS) + log_rms,
+                       jnp.log(floor + _EPS) - 2 * jnp.log(amp + _EPS), ok.astype(float)])
+        )  # fmt: skip
+    if spec.use_speed:
+        v = jnp.asarray(speed_mps, dtype=float)
+        s_edges = jnp.geomspace(spec.spatial_lo, spec.spatial_hi, spec.n_spatial_bands + 1)
+        s_bands = jnp.log(band_energies(freqs / v, power, s_edges) + 1e-4)
+        parts.append(s_bands)
+        parts.append(jnp.stack([jnp.log(jnp.maximum(pf[0], df) / v),
+                                jnp.log(centroid / v), log_rms - 2 * jnp.log(v)]))  # fmt: skip
+    return jnp.concatenate(parts)
+
+
+def window_features(spec: FeatureSpec, x: Float[Array, " window"], speed_mps=jnp.nan):
+    """Feature vector of one window for either pipeline."""
+    if spec.kind == "paper":
+        return paper_features(x)
+    return fitted_features(spec, x, speed_mps)
+
+
+@functools.lru_cache(maxsize=32)
+def feature_function(spec: FeatureSpec):
+    """A jitted ``(windows (n, window), speeds (n,)) -> (n, n_features)`` for ``spec``."""
+
+    @jax.jit
+    def fn(windows, speeds):
+        return jax.vmap(lambda w, v: window_features(spec, w, v))(windows, speeds)
+
+    return fn
+
+
+def compute_features(spec: FeatureSpec, windows, speeds=None) -> jax.Array:
+    """Features of a batch of windows, shape ``(n, spec.n_features)`` (float64).
+
+    Args:
+        spec: The feature settings.
+        windows: Uniformly sampled windows at ``spec.rate_hz``, shape ``(n, spec.window)``.
+        speeds: Robot speed per window (m/s); needed when ``spec.use_speed``.
+    """
+    windows = jnp.asarray(windows, dtype=float)
+    if windows.ndim != 2 or windows.shape[1] != spec.window:
+        raise ValueError(f"windows must have shape (n, {spec.window}), got {windows.shape}")
+    if speeds is None:
+        if spec.use_speed and spec.kind == "fitted":
+            raise ValueError("these features need the robot speed (speed_mps) of each window")
+        speeds = jnp.full(windows.shape[0], jnp.nan)
+    speeds = jnp.broadcast_to(jnp.asarray(speeds, dtype=float), (windows.shape[0],))
+    return feature_function(spec)(windows, speeds)

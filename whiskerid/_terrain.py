@@ -1,0 +1,478 @@
+"""Terrain simulator: labelled whisker recordings of the paper's 7 terrains at any speed.
+
+A wheeled robot (the paper's: 70 mm wheels, 0.27 m long) drives at speed ``v`` over a
+random surface profile ``z(x)``; its body moves, the whisker base moves with it, and the
+whisker's Hall sensor is read by an ADS1115 on a Pi at 200 Hz. Each stage is physical:
+
+1. **Profile** (per track, on a 0.5 mm spatial grid). Every terrain is a *family*:
+
+   * random roughness with an ISO 8608-style displacement PSD
+     ``G_d(n) = G₀ (n/n₀)^(−w)`` (``n`` in cycles/m, ``n₀ = 0.1`` cycles/m; ISO road class
+     A is ``G₀ = 16e-6 m³`` with ``w = 2``), high-passed below 0.5 cycles/m (hills do not
+     shake a whisker);
+   * periodic texture: tile or brick joints (spacing, width, depth; bricks also have a
+     random height step per unit), carpet pile (a few-mm period), sand ripples (a wavelength
+     that wanders by ±15 %);
+   * random discrete bumps: grass tufts and stems, soil clods (Poisson positions, raised
+     cosine shapes).
+
+   Terrain parameters (``TERRAIN_FAMILIES``):
+
+   ============  ========  ====  ==========================================  =====  =====  =====
+   terrain       G₀ (m³)   w     texture                                      f_g    ζ_g    patch
+   ============  ========  ====  ==========================================  =====  =====  =====
+   flat          0.5e-6    2.0   tile joints every 0.30 m, 3 mm × 0.4 mm      45 Hz  0.12   4 mm
+   cement        2e-6      1.5   expansion joints every 1.5 m, 10 × 4 mm      45 Hz  0.12   4 mm
+   brick         2e-6      2.0   joints every 0.10 m, 5 × 2 mm, steps 1.2 mm  45 Hz  0.12   4 mm
+   carpet        1e-6      2.0   pile, 4 mm period, 0.25 mm                   24 Hz  0.35   12 mm
+   soft-grass    40e-6     2.2   tufts, 40 per m, 0.5–2 mm high, 8 mm wide    10 Hz  0.5    20 mm
+   sand          20e-6     2.4   ripples, 80 mm wavelength, 1.5 mm            7 Hz   0.65   25 mm
+   soft-soil     30e-6     2.0   clods, 8 per m, 3–6 mm high, 25 mm wide      20 Hz  0.35   14 mm
+   ============  ========  ====  ==========================================  =====  =====  =====
+
+   A broom-finished cement has a flatter PSD slope (more fine texture) than tiles; brick
+   pavers' main excitation is the height step (lippage) between units.
+   The paper's seventh terrain is called asphalt in its Section IV and soft soil in its
+   results; it is modelled here as soft soil.
+
+2. **Wheel** (the 70 mm wheels). A rigid wheel of radius ``R`` rides on the upper envelope
+   ``z_w(x) = max_{|s|≤R} [z(x+s) + √(R² − s²) − R]`` (it bridges joints narrower than its
+   contact: a 10 mm joint lowers it by only 0.36 mm), then the tyre's (or the sinking
+   wheel's) contact patch averages over ``patch`` metres. Together they low-pass the profile:
+   wavelengths much shorter than the contact are lost (:func:`wheel_filter`).
+3. **Ground and tyre compliance**: the wheel–ground contact is a spring–damper, so the body
+   follows the filtered profile through the base-excitation transmissibility
+   ``H_g(f) = (ω_g² + 2iζ_gω_gω)/(ω_g² − ω² + 2iζ_gω_gω)``; soft ground (grass, sand, soil,
+   carpet) has a low ``f_g`` and high damping ``ζ_g``, hard ground only the tyre.
+4. **Body**: the whisker sits near the front: heave ``0.75 z_front + 0.25 z_rear`` (front
+   and rear wheels 0.17 m apart see the same profile, delayed), averaged over the left and
+   right tracks (independent roughness and bumps, shared joints). Speed enters only through
+   ``x = v t``: a texture of wavelength ``λ`` excites ``f = v/λ``, so every texture moves
+   in frequency with speed. The drivetrain adds class-independent vibration at the motor
+   shaft frequency (gear ratio 48, so ``f_m = 48 v/(2πR)``: 22 Hz at 0.1 m/s, 65 Hz at
+   0.3 m/s) and its second harmonic, and broadband chassis noise.
+5. **Whisker, sensor, ADC**: the base acceleration (on a 2 kHz grid, well above the 288 Hz
+   second mode) drives the exact modal model (:func:`base_motion_response`, jitted and
+   vmapped over runs); the relative deflection at the sensor goes through the Hall sensor,
+   the ADS1115's averaging over its conversion (the anti-alias filter), its noise and
+   quantisation, sampled at 200 Hz with timestamp jitter and a per-run oscillator error.
+
+**Run-to-run variation** (so that classes overlap, as real terrain does): ``G₀`` varies by a
+log-normal factor (σ = 0.35 in ln), ``w`` by ±0.1, spacings by 8 %, depths and heights by
+30 %, ``f_g``/``ζ_g`` by 15 %, the patch by 20 %, the actual speed by 3 % around the
+nominal one, and the drivetrain vibration level by a factor of 2. Everything is drawn from
+``numpy.random.default_rng([seed, terrain, speed, run])``: a dataset is deterministic for
+a seed and does not depend on which other terrains or speeds are synthesised with it.
+"""
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._io import Recording, write_csv
+from ._record import WhiskerRecord, paper_record
+from ._response import base_motion_response, observe
+from ._sensor import HallSensor
+
+SPEEDS_MPS = (0.10, 0.15, 0.20, 0.25, 0.30)
+WHEEL_RADIUS_M = 0.035
+WHEELBASE_M = 0.17
+GEAR_RATIO = 48.0
+PROFILE_DX_M = 5e-4
+INTERNAL_RATE_HZ = 2000.0
+SETTLE_S = 1.0  # simulated before t = 0 and dropped: the whisker starts from rest
+TAIL_S = 0.5  # simulated after the end: the FFT filtering wraps around at the ends
+
+
+@dataclass(frozen=True)
+class TerrainFamily:
+    """A documented family of random terrain profiles (see the module docstring).
+
+    Attributes:
+        name: Label.
+        g0_m3: ISO 8608 roughness ``G_d(n₀)`` at ``n₀ = 0.1`` cycles/m (m³).
+        waviness: PSD slope ``w``.
+        joint_spacing_m: Distance between joints (m); 0 for none.
+        joint_width_m: Joint width (m).
+        joint_depth_m: Joint depth (m).
+        unit_step_m: Standard deviation of the height of each unit between joints (m).
+        pile_period_m: Period of a fine periodic texture (carpet pile) (m); 0 for none.
+        pile_height_m: Its amplitude (m).
+        ripple_m: Wavelength of sand ripples (m); 0 for none.
+        ripple_height_m: Their amplitude (m).
+        bumps_per_m: Mean number of discrete bumps per metre (Poisson).
+        bump_height_m: ``(low, high)`` heights (m), uniform.
+        bump_width_m: Bump width (m).
+        ground_hz: Natural frequency ``f_g`` of the wheel–ground contact (Hz).
+        ground_zeta: Its damping ratio ``ζ_g``.
+        patch_m: Contact patch length (m).
+    """
+
+    name: str
+    g0_m3: float
+    waviness: float
+    joint_spacing_m: float = 0.0
+    joint_width_m: float = 0.0
+    joint_depth_m: float = 0.0
+    unit_step_m: float = 0.0
+    pile_period_m: float = 0.0
+    pile_height_m: float = 0.0
+    ripple_m: float = 0.0
+    ripple_height_m: float = 0.0
+    bumps_per_m: float = 0.0
+    bump_height_m: tuple[float, float] = (0.0, 0.0)
+    bump_width_m: float = 0.0
+    ground_hz: float = 45.0
+    ground_zeta: float = 0.12
+    patch_m: float = 0.004
+
+
+_HARD = {"ground_hz": 45.0, "ground_zeta": 0.12, "patch_m": 0.004}
+TERRAIN_FAMILIES: dict[str, TerrainFamily] = {
+    f.name: f
+    for f in (
+        TerrainFamily("flat", 0.5e-6, 2.0, joint_spacing_m=0.30, joint_width_m=0.003,
+                      joint_depth_m=0.0004, **_HARD),
+        TerrainFamily("cement", 2e-6, 1.5, joint_spacing_m=1.5, joint_width_m=0.010,
+                      joint_depth_m=0.004, **_HARD),
+        TerrainFamily("brick", 2e-6, 2.0, joint_spacing_m=0.10, joint_width_m=0.005,
+                      joint_depth_m=0.002, unit_step_m=0.0012, **_HARD),
+        TerrainFamily("carpet", 1e-6, 2.0, pile_period_m=0.004, pile_height_m=0.00025,
+                      ground_hz=24.0, ground_zeta=0.35, patch_m=0.012),
+        TerrainFamily("soft-grass", 40e-6, 2.2, bumps_per_m=40.0, bump_height_m=(0.0005, 0.002),
+                      bump_width_m=0.008, ground_hz=10.0, ground_zeta=0.5, patch_m=0.020),
+        TerrainFamily("sand", 20e-6, 2.4, ripple_m=0.08, ripple_height_m=0.0015,
+                      ground_hz=7.0, ground_zeta=0.65, patch_m=0.025),
+        TerrainFamily("soft-soil", 30e-6, 2.0, bumps_per_m=8.0, bump_height_m=(0.003, 0.006),
+                      bump_width_m=0.025, ground_hz=20.0, ground_zeta=0.35, patch_m=0.014),
+    )
+}  # fmt: skip
+TERRAINS = tuple(TERRAIN_FAMILIES)
+
+
+def _lognormal(rng, sigma):
+    return float(np.exp(sigma * rng.standard_normal()))
+
+
+def vary(family: TerrainFamily, rng: np.random.Generator) -> TerrainFamily:
+    """One run's terrain: the family's parameters with run-to-run random variation."""
+    return replace(
+        family,
+        g0_m3=family.g0_m3 * _lognormal(rng, 0.35),
+        waviness=family.waviness + 0.1 * rng.uniform(-1, 1),
+        joint_spacing_m=family.joint_spacing_m * (1 + 0.08 * rng.standard_normal()),
+        joint_depth_m=family.joint_depth_m * _lognormal(rng, 0.3),
+        unit_step_m=family.unit_step_m * _lognormal(rng, 0.3),
+        pile_period_m=family.pile_period_m * (1 + 0.08 * rng.standard_normal()),
+        pile_height_m=family.pile_height_m * _lognormal(rng, 0.3),
+        ripple_m=family.ripple_m * (1 + 0.08 * rng.standard_normal()),
+        ripple_height_m=family.ripple_height_m * _lognormal(rng, 0.3),
+        bumps_per_m=family.bumps_per_m * _lognormal(rng, 0.3),
+        ground_hz=family.ground_hz * _lognormal(rng, 0.15),
+        ground_zeta=min(family.ground_zeta * _lognormal(rng, 0.15), 0.95),
+        patch_m=family.patch_m * _lognormal(rng, 0.2),
+    )
+
+
+def iso8608_roughness(
+    n_points: int, dx_m: float, g0_m3: float, waviness: float, rng: np.random.Generator
+) -> np.ndarray:
+    """A Gaussian random profile (m) with PSD ``G₀ (n/0.1)^(−w)`` above 0.5 cycles/m.
+
+    Synthesised in the frequency domain: each rFFT bin ``n_k`` contributes a cosine of
+    random phase and mean-square ``G_d(n_k) Δn`` (the one-sided PSD), so the profile
+    variance is ``Σ G_d Δn ≈ ∫ G_d dn``.
+    """
+    n = np.fft.rfftfreq(n_points, dx_m)
+    dn = n[1]
+    psd = np.where(n >= 0.5, g0_m3 * (np.maximum(n, 1e-9) / 0.1) ** (-waviness), 0.0)
+    coeff = (
+        0.5 * np.sqrt(psd * dn) * (rng.standard_normal(n.size) + 1j * rng.standard_normal(n.size))
+    )
+    return np.fft.irfft(coeff * n_points, n_points)
+
+
+def _joints(x, fam: TerrainFamily, rng) -> np.ndarray:
+    """Rectangular joints (depth, width) at jittered spacing, plus a height step per unit."""
+    z = np.zeros_like(x)
+    if fam.joint_spacing_m <= 0:
+        return z
+    count = int((x[-1] - x[0]) / fam.joint_spacing_m) + 2
+    steps = fam.joint_spacing_m * (1 + 0.03 * rng.standard_normal(count))
+    edges = x[0] - rng.uniform(0, fam.joint_spacing_m) + np.cumsum(steps)
+    unit = np.searchsorted(edges, x)
+    z += fam.unit_step_m * rng.standard_normal(count + 1)[unit]
+    nearest = np.minimum(np.abs(x - edges[np.clip(unit, 0, count - 1)]),
+                         np.abs(x - edges[np.clip(unit - 1, 0, count - 1)]))  # fmt: skip
+    depth = fam.joint_depth_m * (1 + 0.2 * rng.standard_normal(count))[np.clip(unit, 0, count - 1)]
+    return z - np.where(nearest < fam.joint_width_m / 2, depth, 0.0)
+
+
+def _periodic(x, period, height, wander, rng) -> np.ndarray:
+    """A sinusoidal texture whose local wavelength wanders by ``±wander`` (fraction)."""
+    if period <= 0:
+        return np.zeros_like(x)
+    dx = x[1] - x[0]
+    slow = iso8608_roughness(x.size, dx, 1.0, 2.0, rng)
+    slow = wander * slow / (np.std(slow) + 1e-30)
+    phase = 2 * np.pi * np.cumsum(dx / (period * (1 + slow))) + rng.uniform(0, 2 * np.pi)
+    return height * np.sin(phase)
+
+
+def _bumps(x, fam: TerrainFamily, rng) -> np.ndarray:
+    """Raised-cosine bumps at Poisson positions (tufts, stems, clods)."""
+    z = np.zeros_like(x)
+    if fam.bumps_per_m <= 0:
+        return z
+    count = rng.poisson(fam.bumps_per_m * (x[-1] - x[0]))
+    dx = x[1] - x[0]
+    half = max(int(fam.bump_width_m / dx / 2), 1)
+    shape = 0.5 * (1 + np.cos(np.pi * np.arange(-half, half + 1) / half))
+    centres = rng.integers(0, x.size, count)
+    heights = rng.uniform(*fam.bump_height_m, count)
+    for c, h in zip(centres, heights, strict=True):
+        lo, hi = max(c - half, 0), min(c + half + 1, x.size)
+        z[lo:hi] = np.maximum(z[lo:hi], h * shape[lo - c + half : hi - c + half])
+    return z
+
+
+def terrain_profile(
+    fam: TerrainFamily, length_m: float, rng: np.random.Generator, *, dx_m: float = PROFILE_DX_M
+) -> tuple[np.ndarray, np.ndarray]:
+    """Two tracks (left, right) of one run's surface profile ``z(x)`` (m), shape ``(2, n)``.
+
+    Joints are shared by both tracks (they run across the path); roughness and bumps are
+    independent per track.
+
+    Returns:
+        ``(x, z)``: positions (m) and heights (m).
+    """
+    n = int(np.ceil(length_m / dx_m))
+    x = np.arange(n) * dx_m
+    shared = _joints(x, fam, rng) + _periodic(x, fam.ripple_m, fam.ripple_height_m, 0.15, rng)
+    tracks = []
+    for _ in range(2):
+        z = iso8608_roughness(n, dx_m, fam.g0_m3, fam.waviness, rng)
+        z = z + _periodic(x, fam.pile_period_m, fam.pile_height_m, 0.1, rng) + _bumps(x, fam, rng)
+        tracks.append(shared + z)
+    return x, np.stack(tracks)
+
+
+def wheel_filter(
+    z: np.ndarray, dx_m: float, *, radius_m: float = WHEEL_RADIUS_M, patch_m: float = 0.004
+) -> np.ndarray:
+    """Height of a rigid wheel's hub riding on ``z`` (m): upper envelope, then patch average.
+
+    ``z_w(x) = max_{|s|≤R} [z(x+s) + √(R² − s²) − R]`` is where a rigid wheel of radius
+    ``R`` rests; a box average over the contact patch models the tyre (or a wheel sunk into
+    soft ground). Edges are padded with the end values. Works on the last axis.
+    """
+    z = np.asarray(z, dtype=float)
+    k = int(radius_m / dx_m)
+    s = np.arange(-k, k + 1) * dx_m
+    lift = np.sqrt(np.maximum(radius_m**2 - s**2, 0.0)) - radius_m
+    pad = np.pad(z, [(0, 0)] * (z.ndim - 1) + [(k, k)], mode="edge")
+    n = z.shape[-1]
+    env = np.full_like(z, -np.inf)
+    for j in range(2 * k + 1):
+        np.maximum(env, pad[..., j : j + n] + lift[j], out=env)
+    return _box_average(env, max(round(patch_m / dx_m), 1))
+
+
+def _box_average(z: np.ndarray, m: int) -> np.ndarray:
+    """Centred moving average over ``m`` samples on the last axis (edges padded)."""
+    if m <= 1:
+        return z
+    left = m // 2
+    pad = np.pad(z, [(0, 0)] * (z.ndim - 1) + [(left + 1, m - left)], mode="edge")
+    c = np.cumsum(pad, axis=-1)
+    return (c[..., m:] - c[..., :-m])[..., : z.shape[-1]] / m
+
+
+def ground_transmissibility(f_hz: np.ndarray, ground_hz: float, ground_zeta: float) -> np.ndarray:
+    """``H_g(f)``: body motion per unit of filtered profile through the contact spring–damper."""
+    w, wg = 2 * np.pi * np.asarray(f_hz), 2 * np.pi * ground_hz
+    num = wg**2 + 2j * ground_zeta * wg * w
+    return num / (wg**2 - w**2 + 2j * ground_zeta * wg * w)
+
+
+def base_acceleration(
+    terrain: str | TerrainFamily,
+    speed_mps: float,
+    duration_s: float,
+    rng: np.random.Generator,
+    *,
+    rate_hz: float = INTERNAL_RATE_HZ,
+    vary_run: bool = True,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Vertical acceleration of the whisker base (m/s²) on a uniform grid.
+
+    The grid starts ``SETTLE_S`` before 0 and ends ``TAIL_S`` after ``duration_s``.
+
+    Returns:
+        ``(t, acc)`` (s, m/s²).
+    """
+    fam = TERRAIN_FAMILIES[terrain] if isinstance(terrain, str) else terrain
+    if vary_run:
+        fam = vary(fam, rng)
+    v = speed_mps * (1 + 0.03 * rng.standard_normal()) if vary_run else speed_mps
+    t = np.arange(-SETTLE_S, duration_s + TAIL_S, 1.0 / rate_hz)
+    margin = WHEELBASE_M + 4 * WHEEL_RADIUS_M
+    x, z = terrain_profile(fam, v * (t[-1] - t[0]) + 2 * margin, rng)
+    zw = wheel_filter(z, x[1] - x[0], patch_m=fam.patch_m).mean(axis=0)
+    pos = margin + v * (t - t[0])
+    heave = 0.75 * np.interp(pos + WHEELBASE_M, x, zw) + 0.25 * np.interp(pos, x, zw)
+    heave = heave - np.polyval(np.polyfit(t, heave, 1), t)  # a slope is no vibration
+    f = np.fft.rfftfreq(t.size, 1.0 / rate_hz)
+    lowpass = 1.0 / (1.0 + (f / (0.3 * rate_hz)) ** 8)  # keep the grid's content band-limited
+    spec = np.fft.rfft(heave) * ground_transmissibility(f, fam.ground_hz, fam.ground_zeta)
+    acc = np.fft.irfft(-((2 * np.pi * f) ** 2) * lowpass * spec, t.size)
+    return t, acc + _drivetrain(t, v, rng, lowpass, f)
+
+
+def _drivetrain(t, v, rng, lowpass, f) -> np.ndarray:
+    """Class-independent vibration: motor shaft tone (and 2nd harmonic) and chassis noise."""
+    fm = GEAR_RATIO * v / (2 * np.pi * WHEEL_RADIUS_M)
+    level = 0.15 * _lognormal(rng, 0.7)  # m/s²
+    tone = level * (np.sin(2 * np.pi * fm * t + rng.uniform(0, 2 * np.pi))
+                    + 0.4 * np.sin(4 * np.pi * fm * t + rng.uniform(0, 2 * np.pi)))  # fmt: skip
+    noise = np.fft.irfft(np.fft.rfft(rng.standard_normal(t.size)) * lowpass, t.size)
+    return tone + 0.05 * _lognormal(rng, 0.5) * noise / (np.std(noise) + 1e-30)
+
+
+@eqx.filter_jit
+def _sensor_chain(whisker, hall, grid_t, acc, t_samples, conv_time, n_avg: int):
+    """Hall voltage averaged over each conversion, for a batch of runs (vmapped)."""
+
+    def one(acc, t_samples, conv_time):
+        state = base_motion_response(whisker, grid_t, acc, uniform=True)
+        w = observe(whisker, state, "deflection")
+        offsets = -(jnp.arange(n_avg) + 0.5) / n_avg * conv_time
+        tt = t_samples[:, None] + offsets[None, :]
+        return jnp.mean(hall.voltage(jnp.interp(tt, grid_t, w)), axis=1)
+
+    return jax.vmap(one)(acc, t_samples, conv_time)
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One synthetic recording to make: terrain, nominal speed and run number."""
+
+    terrain: str
+    speed_mps: float
+    run: int
+
+
+def _run_rng(seed: int, spec: RunSpec) -> np.random.Generator:
+    return np.random.default_rng(
+        [seed, TERRAINS.index(spec.terrain), round(spec.speed_mps * 1000), spec.run]
+    )
+
+
+def synthesize_runs(
+    specs: list[RunSpec],
+    *,
+    record: WhiskerRecord | None = None,
+    duration_s: float = 30.0,
+    rate_hz: float = 200.0,
+    seed: int = 0,
+    jitter_s: float = 2e-4,
+    noise_v_rms: float = 2.5e-4,
+    amplifier: float = 20.0,
+    batch: int = 24,
+) -> list[Recording]:
+    """Synthesise recordings (ADS1115 codes, column ``adc``) of the given runs.
+
+    Args:
+        specs: What to synthesise.
+        record: The whisker (the paper's by default).
+        duration_s: Length of each recording (s).
+        rate_hz: Host sampling rate (Hz).
+        seed: Dataset seed; each run draws from ``default_rng([seed, terrain, speed, run])``.
+        jitter_s: Timestamp jitter (s).
+        noise_v_rms: ADC input noise (V RMS), about 2 LSB at ±4.096 V.
+        amplifier: Gain of the sensor's amplifier (the paper's whisker has one) applied to
+            the record's bare Hall gain; ×20 makes terrain vibration span tens to hundreds
+            of codes around the offset.
+        batch: Runs simulated per vmapped call (bounds memory).
+    """
+    record = paper_record() if record is None else record
+    for s in specs:
+        if s.terrain not in TERRAIN_FAMILIES:
+            raise ValueError(f"unknown terrain {s.terrain!r}; known: {', '.join(TERRAINS)}")
+        if not 0 < s.speed_mps < 5:
+            raise ValueError(f"speed {s.speed_mps!r} m/s is not plausible (0 < v < 5)")
+    if duration_s * rate_hz < 2:
+        raise ValueError("duration_s * rate_hz must give at least 2 samples")
+    whisker = record.whisker()
+    hall = HallSensor(
+        gain_v_per_m=record.hall.gain_v_per_m * amplifier,
+        offset_v=record.hall.offset_v,
+        quadratic_v_per_m2=record.hall.quadratic_v_per_m2 * amplifier,
+    )
+    rows = []
+    for spec in specs:
+        rng = _run_rng(seed, spec)
+        t_grid, acc = base_acceleration(spec.terrain, spec.speed_mps, duration_s, rng)
+        adc = replace(record.adc, jitter_s=jitter_s, clock_error=float(rng.uniform(-0.05, 0.05)))
+        rows.append((t_grid, acc, adc.sample_times(rate_hz, duration_s, rng=rng), adc, rng))
+    out = []
+    for lo in range(0, len(rows), batch):
+        chunk = rows[lo : lo + batch]
+        volts = np.asarray(
+            _sensor_chain(
+                whisker,
+                hall,
+                jnp.asarray(chunk[0][0]),
+                jnp.asarray(np.stack([r[1] for r in chunk])),
+                jnp.asarray(np.stack([r[2] for r in chunk])),
+                jnp.asarray([r[3].conversion_time_s for r in chunk]),
+                record.adc.averaging_points,
+            )
+        )
+        for (_, _, ts, adc, rng), v, spec in zip(chunk, volts, specs[lo:], strict=False):
+            noisy = v + noise_v_rms * rng.standard_normal(v.shape)
+            codes = np.asarray(adc.quantise(noisy)).astype(np.int64)
+            meta = {
+                "terrain": spec.terrain,
+                "speed_mps": f"{spec.speed_mps:g}",
+                "rate_hz": f"{rate_hz:g}",
+                "units": "code",
+                "whisker": record.name,
+                "amplifier": f"{amplifier:g}",
+                "run": str(spec.run),
+                "seed": str(seed),
+                "source": "whiskerid terrain simulator",
+            }
+            out.append(Recording(t=ts, columns={"adc": codes}, meta=meta))
+    return out
+
+
+def synthesize_dataset(
+    out: str | Path,
+    *,
+    record: WhiskerRecord | None = None,
+    terrains: tuple[str, ...] = TERRAINS,
+    speeds: tuple[float, ...] = SPEEDS_MPS,
+    runs: int = 4,
+    duration_s: float = 30.0,
+    seed: int = 0,
+) -> list[Path]:
+    """Write a labelled dataset ``out/<terrain>/<terrain>_v<speed>_r<run>.csv`` (NOTES §6).
+
+    Returns:
+        The CSV paths, in terrain, speed, run order.
+    """
+    if runs < 1:
+        raise ValueError("runs must be at least 1")
+    specs = [RunSpec(t, float(v), r) for t in terrains for v in speeds for r in range(runs)]
+    recs = synthesize_runs(specs, record=record, duration_s=duration_s, seed=seed)
+    paths = []
+    for spec, rec in zip(specs, recs, strict=True):
+        name = f"{spec.terrain}_v{spec.speed_mps:.2f}_r{spec.run:02d}.csv"
+        paths.append(write_csv(Path(out) / spec.terrain / name, rec))
+    return paths
