@@ -30,6 +30,7 @@ import jax as _jax
 
 _jax.config.update("jax_enable_x64", True)
 
+from ._borealtc import load_borealtc as load_borealtc
 from ._calibrate import Calibration as Calibration
 from ._calibrate import CalibrationError as CalibrationError
 from ._calibrate import Observation as Observation

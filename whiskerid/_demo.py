@@ -101,4 +101,38 @@ def run_demo(out: Path, *, plots: bool = True, say=print) -> dict:
             png = plot_modal_analysis(out / f"modal_analysis_{name}.png", rows)
             summary[f"modal_analysis_{name}_png"] = str(png)
         say(f"      plots: {out}/modal_analysis_paper.png, modal_analysis_exact.png, *_adc.png")
+    summary["classification"] = _classification_stage(out, plots=plots, say=say)
     return summary
+
+
+def _classification_stage(out: Path, *, plots: bool, say) -> dict:
+    """Small synthetic terrain dataset (7 terrains, 0.2 m/s), trained and tested by recording."""
+    from ._classify import (
+        evaluate,
+        format_confusion,
+        load_dataset,
+        plot_confusion,
+        split_by_recording,
+        train_classifier,
+    )
+    from ._terrain import synthesize_dataset
+
+    say("[+] terrain classification: 7 simulated terrains at 0.2 m/s, 3 runs x 10 s each")
+    synthesize_dataset(out / "terrain", speeds=(0.2,), runs=3, duration_s=10.0, seed=0)
+    train, test = split_by_recording(load_dataset(out / "terrain"), 0.34, seed=0)
+    model = train_classifier(train)
+    model.save(out / "terrain-model")
+    res = evaluate(model, test)
+    say(format_confusion(res["confusion"], res["labels"]))
+    say(
+        f"      accuracy on held-out recordings: {res['accuracy']:.3f} ({res['n_windows']} windows)"
+    )
+    if plots:
+        res["png"] = str(
+            plot_confusion(out / "terrain_confusion.png", res["confusion"], res["labels"])
+        )
+    return {
+        "accuracy": res["accuracy"],
+        "per_class": res["per_class"],
+        "model": str(out / "terrain-model"),
+    }
