@@ -1,12 +1,18 @@
 """Online classification on the (emulated) ADS1115 stream."""
 
+import json
 import os
 import signal
+import subprocess
+import sys
+import time
 
 import numpy as np
+import pytest
 
 import whiskerid as wi
 from whiskerid import hw
+from whiskerid._cli import main
 from whiskerid._stream import OnlineClassifier, run_stream
 
 
@@ -67,3 +73,108 @@ def test_run_stream_records_and_stops_on_sigterm(tmp_path):
     assert recorder.closed
     rec = wi.read_recording(tmp_path / "r.csv")
     assert rec.t.size == 300 and rec.meta["units"] == "code"
+
+
+@pytest.fixture(scope="module")
+def tiny_model(tmp_path_factory):
+    """A real model trained on a small synthetic dataset (two terrains, one speed)."""
+    root = tmp_path_factory.mktemp("stream")
+    ds, model = root / "ds", root / "model"
+    assert (
+        main(
+            [
+                "dataset",
+                "synth",
+                "--out",
+                str(ds),
+                "--terrains",
+                "brick",
+                "sand",
+                "--speeds",
+                "0.2",
+                "--runs",
+                "2",
+                "--duration",
+                "15",
+                "--seed",
+                "3",
+            ]
+        )
+        == 0
+    )
+    assert main(["train", str(ds), "--out", str(model), "--seed", "0"]) == 0
+    return model
+
+
+def test_stream_cli_on_the_emulated_chip(tiny_model, tmp_path, capsys):
+    rec = tmp_path / "rec.csv"
+    rec.write_text("taken")  # an existing file is never overwritten
+    args = [
+        "stream",
+        "--model",
+        str(tiny_model),
+        "--simulate",
+        "brick",
+        "--speed",
+        "0.2",
+        "--duration",
+        "12",
+        "--fast",
+        "--record",
+        str(rec),
+        "--json",
+        "--quiet",
+    ]
+    assert main(args) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["samples"] == pytest.approx(12 * 200, abs=2)
+    # A tiny two-class model (57 training windows): well above chance, not a benchmark.
+    assert out["windows"] == 22 and out["fraction_correct"] >= 0.7
+    assert out["majority_label"] == "brick"
+    assert out["latency_ms"]["p99"] < 1000  # compiled before the stream started
+    assert rec.read_text() == "taken"
+    written = wi.read_recording(out["record"])
+    assert written.t.size == out["samples"] and written.meta["terrain"] == "brick"
+    assert np.all(np.diff(written.t) > 0)
+
+
+def test_stream_cli_refuses_bad_input(tiny_model, tmp_path, capsys):
+    assert main(["stream", "--model", str(tiny_model), "--simulate", "ice", "--fast"]) == 2
+    assert "not a terrain of this model" in capsys.readouterr().err
+    assert main(["stream", "--model", str(tmp_path), "--simulate", "brick"]) == 2
+    assert main(["stream", "--model", str(tiny_model), "--i2c-bus", "1", "--fast"]) == 2
+
+
+@pytest.mark.slow
+def test_kill_9_mid_run_leaves_a_readable_recording(tiny_model, tmp_path):
+    rec = tmp_path / "rec.csv"
+    cmd = [
+        sys.executable,
+        "-m",
+        "whiskerid._cli",
+        "stream",
+        "--model",
+        str(tiny_model),
+        "--simulate",
+        "sand",
+        "--duration",
+        "60",
+        "--record",
+        str(rec),
+        "--quiet",
+    ]
+    proc = subprocess.Popen(cmd, stderr=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:  # wait for about 3 s of data on disk
+            if rec.exists() and rec.read_text().count("\n") > 600:
+                break
+            time.sleep(0.2)
+        else:
+            pytest.fail("the stream never wrote 3 s of data")
+    finally:
+        proc.kill()  # SIGKILL: no chance to close or flush
+        proc.wait()
+    got = hw.read_recording_csv(rec)
+    assert got.t.size >= 600
+    assert np.all(np.diff(got.t) > 0)

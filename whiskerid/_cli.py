@@ -214,6 +214,9 @@ def build_parser() -> argparse.ArgumentParser:
     from ._classify_cli import add_classify_commands
 
     add_classify_commands(sub, CommandError)
+    from ._stream_cli import add_stream
+
+    add_stream(sub, CommandError)
     return parser
 
 

@@ -63,6 +63,10 @@ class OnlineClassifier:
         self._next_s: float | None = None
         self._grid = np.arange(model.window) / model.rate_hz
 
+    def warm_up(self) -> None:
+        """Compile the model's path once, so that the first window's latency is honest."""
+        self.model.predict_window(np.zeros(self.model.window), self.speed)
+
     def push(self, t_s: float, value: float) -> WindowLabel | None:
         """Add a sample; return a label when a window is due, else None."""
         arrived = self._clock()

@@ -92,6 +92,7 @@ def _cmd_stream(args, command_error) -> dict:
         meta["terrain"] = args.simulate
     recorder = open_recorder(args.record, rate_hz=args.rate, meta=meta)
     online = OnlineClassifier(model, hop_s=args.hop, speed_mps=args.speed)
+    online.warm_up()
 
     def show(w):
         if not args.quiet:
