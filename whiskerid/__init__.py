@@ -13,6 +13,8 @@ Public API, re-exported from private modules (SI units throughout):
 * calibration: :func:`calibrate` (κ/f_1, ζ, EI or C with uncertainties from recordings and
   static tests), :class:`Observation`, :class:`StaticTest`, :class:`Calibration`, and
   :func:`fit_windows` (batched per-window damped-oscillation fits);
+* posteriors: :func:`sample_posterior` (emcee, jointly over recordings, Gaussian or
+  Student-t, HDF5 resume, τ-based convergence), :func:`setup_posterior`, :class:`Posterior`;
 * terrain classification: :func:`synthesize_dataset` (simulated terrains),
   :func:`compute_features` / :class:`FeatureSpec`, :func:`load_dataset`,
   :func:`train_classifier`, :func:`evaluate_classifier`, :func:`paper_protocol`, and
@@ -61,6 +63,10 @@ from ._modes import cantilever_roots as cantilever_roots
 from ._modes import mode_shape as mode_shape
 from ._modes import participation_factors as participation_factors
 from ._paper import paper_eq1 as paper_eq1
+from ._posterior import Posterior as Posterior
+from ._posterior import PosteriorError as PosteriorError
+from ._posterior import sample_posterior as sample_posterior
+from ._posterior import setup_posterior as setup_posterior
 from ._record import RecordError as RecordError
 from ._record import WhiskerRecord as WhiskerRecord
 from ._record import load_record as load_record

@@ -211,6 +211,9 @@ def build_parser() -> argparse.ArgumentParser:
     from ._calibrate_cli import add_calibrate
 
     add_calibrate(sub, CommandError)
+    from ._posterior_cli import add_posterior
+
+    add_posterior(sub, CommandError)
     from ._classify_cli import add_classify_commands
 
     add_classify_commands(sub, CommandError)

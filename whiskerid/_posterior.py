@@ -1,0 +1,739 @@
+"""Posteriors of a whisker's ζ, f_1 (κ) and EI or C with emcee (issue 4).
+
+Model. The calibration's residual model (:mod:`whiskerid._calibrate`), jointly over one or
+more recordings of one whisker: each recording is ``y = D(θ) c + g(θ) + ε`` in normalised
+units (``y`` divided by its standard deviation), with shared nonlinear parameters ``θ``
+(``log κ``, ``logit ζ``, a static test's ``log EI`` and offset, a sine's start time) and
+per-recording linear coefficients ``c`` (offset, drift, modal amplitudes).
+
+Likelihood. ``gaussian`` (default): ``ε ~ N(0, σ_j²)`` with an unknown σ per recording,
+sampled as ``log σ_j``. The linear coefficients are *marginalised analytically*: with a
+flat (improper) prior on ``c`` the integral is closed-form (variable projection),
+``log L_j = −(n−k) log σ − ½ log|DᵀD| − RSS_min/(2σ²) − (n−k)/2 log 2π``, with ``RSS_min``
+the least-squares residual at ``θ`` (computed by a QR factorisation). ``student``: a
+Student-t with ``ν`` (default 4) degrees of freedom and scale σ_j for outliers; there is no
+closed form, so ``c`` is sampled with the other parameters (``marginalize=False`` does the
+same for the Gaussian, e.g. for comparisons with samplers that cannot marginalise).
+
+Priors. From the record's ``[prior]`` table, on physical quantities, with the Jacobian of
+the sampled transform added: ``zeta``, ``f1_hz`` or ``kappa``, and ``sigma_rel`` (noise σ
+relative to each recording's standard deviation). Distributions: ``uniform`` and
+``loguniform`` (``low``, ``high``), ``normal`` (``mu``, ``sigma``), ``lognormal`` (``mu``,
+``sigma`` of ``ln x``). Outside a bounded support the log-probability is ``−inf``.
+Defaults when absent: ``zeta`` uniform on ``(0, 0.95)`` (the calibration's range),
+``f1_hz`` log-uniform over ``[f̂/10, 10 f̂]`` around the calibrated ``f̂``, ``sigma_rel``
+log-uniform on ``[1e-6, 10]``. A static test's ``log EI``, its offset and a sine's start
+time have flat priors.
+
+Sampler. ``emcee.EnsembleSampler(vectorize=True)`` on a jitted, vmapped log-probability;
+walkers start from the calibration's Laplace approximation (a draw from ``N(θ̂, Σ)``
+in the sampled space: additive, so parameters at exactly 0 are no problem); reproducible
+by seed (``emcee.State(p0, random_state=...)``); optional HDF5 backend with resume.
+
+Diagnostics. Integrated autocorrelation time τ per sampled coordinate and per reported
+quantity (``quiet=True``), burn-in ``2 max τ``, thinning ``min τ / 2``, effective sample
+size ``walkers (steps − burn)/τ``; a run shorter than ``50 max τ`` is reported as
+``converged = False`` with the number of steps needed.
+"""
+
+import datetime
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import _calibrate as _cal
+from ._calibrate import ZETA_MAX, Observation, sha256_of
+from ._record import WhiskerRecord
+
+LIKELIHOODS = ("gaussian", "student")
+DISTS = ("uniform", "loguniform", "normal", "lognormal")
+PRIOR_KEYS = ("zeta", "f1_hz", "kappa", "sigma_rel")
+_DIST_ARGS = {
+    "uniform": ("low", "high"),
+    "loguniform": ("low", "high"),
+    "normal": ("mu", "sigma"),
+    "lognormal": ("mu", "sigma"),
+}
+
+
+class PosteriorError(ValueError):
+    """Input that cannot be sampled (message says what)."""
+
+
+# --------------------------------------------------------------------------- priors
+def parse_prior(table: dict | None) -> dict[str, tuple[str, float, float]]:
+    """Check a ``[prior]`` table: name → ``(dist, a, b)``.
+
+    Args:
+        table: e.g. ``{"zeta": {"dist": "uniform", "low": 0, "high": 0.5}}``.
+
+    Raises:
+        PosteriorError: unknown names or distributions, missing or invalid arguments.
+    """
+    out = {}
+    for key, spec in (table or {}).items():
+        if key not in PRIOR_KEYS:
+            raise PosteriorError(f"prior: unknown parameter {key!r} (known: {PRIOR_KEYS})")
+        if not isinstance(spec, dict) or spec.get("dist") not in DISTS:
+            raise PosteriorError(f"prior {key}: give dist = one of {DISTS}")
+        dist = spec["dist"]
+        names = _DIST_ARGS[dist]
+        try:
+            a, b = (float(spec[n]) for n in names)
+        except (KeyError, TypeError, ValueError):
+            raise PosteriorError(f"prior {key}: {dist} needs numbers {names}") from None
+        if dist in ("uniform", "loguniform") and not a < b:
+            raise PosteriorError(f"prior {key}: need low < high")
+        if dist == "loguniform" and not a > 0:
+            raise PosteriorError(f"prior {key}: loguniform needs low > 0")
+        if dist in ("normal", "lognormal") and not b > 0:
+            raise PosteriorError(f"prior {key}: sigma must be > 0")
+        out[key] = (dist, a, b)
+    if "f1_hz" in out and "kappa" in out:
+        raise PosteriorError("prior: give f1_hz or kappa, not both")
+    return out
+
+
+def prior_logpdf(dist: str, x, a, b):
+    """Log-density of a prior at ``x`` (−inf outside a bounded support)."""
+    if dist == "uniform":
+        return jnp.where((x >= a) & (x <= b), -jnp.log(b - a), -jnp.inf)
+    if dist == "loguniform":
+        inside = (x >= a) & (x <= b)
+        return jnp.where(inside, -jnp.log(x) - jnp.log(jnp.log(b / a)), -jnp.inf)
+    if dist == "normal":
+        return -0.5 * ((x - a) / b) ** 2 - jnp.log(b) - 0.5 * math.log(2 * math.pi)
+    if dist == "lognormal":
+        lx = jnp.log(jnp.where(x > 0, x, 1.0))
+        val = -lx - 0.5 * ((lx - a) / b) ** 2 - jnp.log(b) - 0.5 * math.log(2 * math.pi)
+        return jnp.where(x > 0, val, -jnp.inf)
+    raise PosteriorError(f"unknown prior {dist!r}")
+
+
+def default_prior(f1_hz: float) -> dict[str, tuple[str, float, float]]:
+    """Priors used for the names the record's ``[prior]`` does not give."""
+    return {
+        "zeta": ("uniform", 0.0, ZETA_MAX),
+        "f1_hz": ("loguniform", f1_hz / 10, f1_hz * 10),
+        "sigma_rel": ("loguniform", 1e-6, 10.0),
+    }
+
+
+# --------------------------------------------------------------------------- model
+@dataclass(frozen=True)
+class _Model:
+    """Static description of the log-probability (hashable: the jit key)."""
+
+    problem: Any
+    unravel: Any
+    n_theta: int
+    n_rec: int
+    likelihood: str
+    marginal: bool
+    priors: tuple[tuple[str, str], ...]  # (name, dist); numbers travel in args
+
+    @property
+    def ndim(self) -> int:
+        return self.n_theta + self.n_rec
+
+
+def _rec_loglik(model, spec, rec, d, w, log_sigma, nu):
+    D, g = _cal._design(model.problem, spec, w, rec, d)
+    y = d["y"] - g
+    n = y.shape[0]
+    sigma = jnp.exp(log_sigma)
+    if model.marginal:
+        q, r = jnp.linalg.qr(D)
+        resid = y - q @ (q.T @ y)
+        k = D.shape[1]
+        logdet = 2 * jnp.sum(jnp.log(jnp.abs(jnp.diag(r))))
+        return (
+            -(n - k) * log_sigma
+            - 0.5 * logdet
+            - 0.5 * jnp.sum(resid**2) / sigma**2
+            - 0.5 * (n - k) * math.log(2 * math.pi)
+        )
+    z = (D @ rec["c"] - y) / sigma
+    if model.likelihood == "gaussian":
+        return -n * log_sigma - 0.5 * jnp.sum(z**2) - 0.5 * n * math.log(2 * math.pi)
+    const = (
+        jax.scipy.special.gammaln((nu + 1) / 2)
+        - jax.scipy.special.gammaln(nu / 2)
+        - 0.5 * jnp.log(nu * jnp.pi)
+    )
+    return n * (const - log_sigma) - 0.5 * (nu + 1) * jnp.sum(jnp.log1p(z**2 / nu))
+
+
+def _log_prior(model, theta, w, log_sigma, args):
+    lp = 0.0
+    for name, dist in model.priors:
+        a, b = args["prior"][name][0], args["prior"][name][1]
+        if name == "zeta":
+            u = jnp.atleast_1d(theta["zeta_u"])
+            z = _cal._lsq.to_interval(u, 0.0, ZETA_MAX)
+            # dζ/du = ζ (ζmax − ζ)/ζmax
+            jac = jnp.log(z) + jnp.log(ZETA_MAX - z) - math.log(ZETA_MAX)
+            lp = lp + jnp.sum(prior_logpdf(dist, z, a, b) + jac)
+        elif name == "f1_hz":  # f_1 ∝ √κ: d f_1 / d log κ = f_1 / 2
+            f1 = w.natural_frequencies_hz[0]
+            lp = lp + prior_logpdf(dist, f1, a, b) + jnp.log(f1 / 2)
+        elif name == "kappa":
+            kappa = jnp.exp(theta["log_kappa"])
+            lp = lp + prior_logpdf(dist, kappa, a, b) + theta["log_kappa"]
+        elif name == "sigma_rel":
+            s = jnp.exp(log_sigma)
+            lp = lp + jnp.sum(prior_logpdf(dist, s, a, b) + log_sigma)
+    return lp
+
+
+def log_prob_one(model: _Model, z, args):
+    """Log-posterior (up to a constant) at one point ``z`` of the sampled space."""
+    theta = model.unravel(z[: model.n_theta])
+    log_sigma = z[model.n_theta :]
+    w = _cal._whisker(model.problem, theta)
+    lp = _log_prior(model, theta, w, log_sigma, args)
+    for j, (spec, rec, d) in enumerate(
+        zip(model.problem.specs, theta["recs"], args["recs"], strict=True)
+    ):
+        lp = lp + _rec_loglik(model, spec, rec, d, w, log_sigma[j], args["nu"])
+    if model.problem.static_x_m is not None:
+        s = args["static"]
+        x, l = model.problem.static_x_m, model.problem.length_m
+        pred = theta["static_d0"] + s["force"] * (x**2 * (3 * l - x) / 6) / jnp.exp(theta["log_EI"])
+        lp = lp - 0.5 * jnp.sum(((pred - s["deflection"]) / s["sigma"]) ** 2)
+    return jnp.where(jnp.isfinite(lp), lp, -jnp.inf)
+
+
+@eqx.filter_jit
+def _log_prob_batch(model, z, args):
+    return jax.vmap(lambda zz: log_prob_one(model, zz, args))(z)
+
+
+# --------------------------------------------------------------------------- setup
+@dataclass
+class Problem:
+    """A posterior problem, ready to sample (from :func:`setup_posterior`).
+
+    Attributes:
+        model: Static model description.
+        args: Data and prior numbers (arrays).
+        z0: Laplace centre in the sampled space.
+        cov: Laplace covariance in the sampled space.
+        names: Names of the sampled coordinates.
+        priors: The priors used, name → ``(dist, a, b)``, and whether each was a default.
+        observations: The recordings.
+        record: The whisker's record.
+        pin: What fixes EI or C (as in the calibration).
+        y_std: Each recording's standard deviation (σ in observed units = σ_rel · y_std).
+    """
+
+    model: _Model
+    args: dict
+    z0: np.ndarray
+    cov: np.ndarray
+    names: list[str]
+    priors: dict[str, dict]
+    observations: list[Observation]
+    record: WhiskerRecord
+    pin: str
+    y_std: list[float]
+    nu: float = 4.0
+
+    def log_prob(self, z) -> np.ndarray:
+        """Log-posterior at points ``z`` of shape ``(ndim,)`` or ``(walkers, ndim)``."""
+        z = np.atleast_2d(np.asarray(z, dtype=float))
+        return np.asarray(_log_prob_batch(self.model, jnp.asarray(z), self.args))
+
+
+def _drop_c(tree):
+    return {**tree, "recs": [{k: v for k, v in r.items() if k != "c"} for r in tree["recs"]]}
+
+
+def setup_posterior(
+    record: WhiskerRecord,
+    observations: list[Observation] | Observation,
+    *,
+    static=None,
+    n_modes: int | None = None,
+    zeta_per_mode: bool = False,
+    pin: str = "auto",
+    likelihood: str = "gaussian",
+    nu: float = 4.0,
+    marginalize: bool | None = None,
+    prior: dict | None = None,
+    f1_start_hz: float | None = None,
+) -> Problem:
+    """Fit the calibration model (its Laplace approximation) and build the log-posterior.
+
+    Args:
+        record: The whisker's record (a calibrated one from ``whiskerid calibrate`` is a
+            good start); its ``[prior]`` table is used unless ``prior`` is given.
+        observations: Recordings of this whisker, sampled jointly.
+        static: Optional static test (as in :func:`whiskerid.calibrate`).
+        n_modes: Modes in the model; the record's ``[fit] n_modes`` (else 1) by default.
+        zeta_per_mode: One ζ per mode.
+        pin: What fixes EI or C (``auto``/``geometry``/``material``).
+        likelihood: ``gaussian`` or ``student``.
+        nu: Student-t degrees of freedom.
+        marginalize: Marginalise the linear coefficients analytically (Gaussian only; the
+            default there); ``False`` samples them.
+        prior: A ``[prior]`` table overriding the record's.
+        f1_start_hz: Centre of the calibration's start search (the record's f_1 otherwise).
+
+    Returns:
+        A :class:`Problem`.
+    """
+    obs = [observations] if isinstance(observations, Observation) else list(observations)
+    if not obs:
+        raise PosteriorError("no recordings")
+    if likelihood not in LIKELIHOODS:
+        raise PosteriorError(f"likelihood must be one of {LIKELIHOODS}, not {likelihood!r}")
+    if marginalize is None:
+        marginalize = likelihood == "gaussian"
+    if marginalize and likelihood != "gaussian":
+        raise PosteriorError("only the Gaussian likelihood can marginalise the linear nuisances")
+    if not nu > 0:
+        raise PosteriorError("nu must be > 0")
+    fit = record.extra.get("fit", {})
+    n_modes = int(n_modes or fit.get("n_modes", 1))
+    if pin == "auto" and fit.get("pin") in ("geometry", "material"):
+        pin = fit["pin"]
+    pin = "geometry" if pin == "auto" else pin
+    table = prior if prior is not None else record.extra.get("prior")
+    user = parse_prior(table)
+
+    lap = _laplace(record, obs, static, n_modes, zeta_per_mode, f1_start_hz)
+    problem, args, theta_hat, cov_full, unravel_full, sig = lap
+    # Sampled space: the calibration's flat vector (without c when marginalised) + log σ_j.
+    idx_tree = unravel_full(jnp.arange(cov_full.shape[0], dtype=float))
+    if marginalize:
+        theta_s, idx_tree = _drop_c(theta_hat), _drop_c(idx_tree)
+    else:
+        theta_s = theta_hat
+    flat_s, unravel_s = _cal._ravel(theta_s)
+    idx = np.asarray(_cal._ravel(idx_tree)[0]).astype(int)
+    n_theta = int(flat_s.size)
+    n_rec = len(obs)
+    n_samples = np.array([o.t.size for o in obs], float)
+    z0 = np.concatenate([np.asarray(flat_s), np.log(sig)])
+    cov = np.zeros((n_theta + n_rec,) * 2)
+    cov[:n_theta, :n_theta] = cov_full[np.ix_(idx, idx)]
+    cov[n_theta:, n_theta:] = np.diag(1.0 / (2 * n_samples))
+    names = _names(theta_s, n_rec)
+
+    w_hat = _cal._whisker(problem, theta_s)
+    f1_hat = float(w_hat.natural_frequencies_hz[0])
+    priors = {
+        k: {"dist": v[0], "a": v[1], "b": v[2], "default": True}
+        for k, v in default_prior(f1_hat).items()
+    }
+    if "kappa" in user:
+        priors.pop("f1_hz")
+    for k, v in user.items():
+        priors[k] = {"dist": v[0], "a": v[1], "b": v[2], "default": False}
+    args = {
+        "recs": [{k: v for k, v in d.items() if k != "weight"} for d in args["recs"]],
+        **(
+            {"static": {k: v for k, v in args["static"].items() if k != "fit"}}
+            if "static" in args
+            else {}
+        ),
+        "prior": {k: jnp.asarray([p["a"], p["b"]]) for k, p in priors.items()},
+        "nu": jnp.asarray(float(nu)),
+    }
+    model = _Model(
+        problem=problem,
+        unravel=unravel_s,
+        n_theta=n_theta,
+        n_rec=n_rec,
+        likelihood=likelihood,
+        marginal=bool(marginalize),
+        priors=tuple((k, p["dist"]) for k, p in priors.items()),
+    )
+    return Problem(
+        model=model,
+        args=args,
+        z0=z0,
+        cov=cov,
+        names=names,
+        priors=priors,
+        observations=obs,
+        record=record,
+        pin=pin,
+        y_std=[float(np.std(o.y)) for o in obs],
+        nu=float(nu),
+    )
+
+
+def _names(theta, n_rec):
+    names = []
+    for path, leaf in jax.tree_util.tree_flatten_with_path(theta)[0]:
+        key = jax.tree_util.keystr(path).replace("['", ".").replace("']", "").lstrip(".")
+        key = key.replace("zeta_u", "logit_zeta")
+        n = int(np.size(leaf))
+        names += [key] if n == 1 else [f"{key}[{i}]" for i in range(n)]
+    return names + [f"log_sigma[{j}]" for j in range(n_rec)]
+
+
+def _laplace(record, obs, static, n_modes, zeta_per_mode, f1_start_hz):
+    """The calibration fit (private helpers of :mod:`whiskerid._calibrate`, read-only)."""
+    nominal = record.whisker().with_modes(n_modes)
+    problem, args, recs0 = _cal._prepare(
+        record, obs, static, n_modes, zeta_per_mode, float(nominal.rho_a)
+    )
+    f1_nom = f1_start_hz or float(nominal.natural_frequencies_hz[0])
+    zeta_nom = float(np.mean(nominal.zeta))
+    theta0 = _cal._start(problem, args, recs0, obs, nominal, f1_nom, zeta_nom, static)
+    flat0, unravel = _cal._ravel(theta0)
+    fn = jax.tree_util.Partial(_cal._residuals_entry, problem, unravel)
+    res = _cal._fit(fn, flat0, args, "levenberg-marquardt", 400)
+    args = _cal._reweight(problem, unravel, res.value, args)
+    res = _cal._fit(fn, res.value, args, "levenberg-marquardt", 400)
+    cov, _ = _cal._covariance_jit(fn, res.value, args)
+    cov = np.asarray(cov)
+    if not np.all(np.isfinite(cov)):
+        scale = 1e-4 * np.maximum(np.abs(np.asarray(res.value)), 1e-2)
+        cov = np.diag(scale**2)
+    sig = np.array([1.0 / float(d["weight"]) for d in args["recs"]])
+    return problem, args, unravel(res.value), cov, unravel, sig
+
+
+# --------------------------------------------------------------------------- sampling
+def initial_walkers(prob: Problem, n_walkers: int, rng: np.random.Generator) -> np.ndarray:
+    """Walkers drawn from the Laplace approximation, all with a finite log-probability.
+
+    Draws ``z0 + L ε`` (``L Lᵀ = Σ``); walkers outside the support are drawn again, with
+    the spread halved each round; the centre itself is moved inside a bounded prior.
+    """
+    ndim = prob.z0.size
+    cov = 0.5 * (prob.cov + prob.cov.T)
+    jitter = 1e-12 * max(float(np.max(np.abs(np.diag(cov)))), 1e-12)
+    try:
+        chol = np.linalg.cholesky(cov + jitter * np.eye(ndim))
+    except np.linalg.LinAlgError:
+        chol = np.diag(np.sqrt(np.maximum(np.abs(np.diag(cov)), 1e-12)))
+    p = prob.z0 + rng.standard_normal((n_walkers, ndim)) @ chol.T
+    scale = 1.0
+    for _ in range(60):
+        bad = ~np.isfinite(prob.log_prob(p))
+        if not bad.any():
+            return p
+        scale *= 0.5
+        p[bad] = prob.z0 + scale * rng.standard_normal((int(bad.sum()), ndim)) @ chol.T
+    raise PosteriorError(
+        "could not start the walkers with a finite log-probability: is the calibrated value "
+        "inside the prior's support?"
+    )
+
+
+def run_sampler(
+    prob: Problem,
+    *,
+    walkers: int = 32,
+    steps: int = 2000,
+    seed: int = 0,
+    backend: str | Path | None = None,
+    resume: bool = False,
+    progress: bool = False,
+):
+    """Run emcee (vectorised) and return the sampler.
+
+    Args:
+        prob: From :func:`setup_posterior`.
+        walkers: Number of walkers (at least twice the dimension).
+        steps: Steps to run (added to the backend's when resuming).
+        seed: Seeds the start and emcee's own random state.
+        backend: HDF5 file for the chain (needs ``h5py``).
+        resume: Continue the chain in ``backend`` instead of starting afresh.
+        progress: emcee's progress bar (tqdm).
+    """
+    import emcee
+
+    ndim = prob.z0.size
+    if walkers < 2 * ndim:
+        raise PosteriorError(f"need at least {2 * ndim} walkers for {ndim} parameters")
+    if steps < 1:
+        raise PosteriorError("steps must be >= 1")
+    be = None
+    if backend is not None:
+        try:
+            import h5py  # noqa: F401
+        except ImportError:
+            raise PosteriorError("the HDF5 backend needs h5py (pip install h5py)") from None
+        be = emcee.backends.HDFBackend(str(backend), name="whiskerid")
+        if resume:
+            if not Path(backend).exists() or be.iteration == 0:
+                raise PosteriorError(f"{backend}: nothing to resume")
+            if be.shape != (walkers, ndim):
+                raise PosteriorError(
+                    f"{backend}: holds {be.shape[0]} walkers × {be.shape[1]} parameters, "
+                    f"not {walkers} × {ndim}"
+                )
+        else:
+            be.reset(walkers, ndim)
+    sampler = emcee.EnsembleSampler(walkers, ndim, prob.log_prob, vectorize=True, backend=be)
+    if resume:
+        state = be.get_last_sample()
+        if state.random_state is None:
+            state.random_state = np.random.RandomState(seed).get_state()
+    else:
+        p0 = initial_walkers(prob, walkers, np.random.default_rng(seed))
+        state = emcee.State(p0, random_state=np.random.RandomState(seed).get_state())
+    sampler.run_mcmc(state, steps, progress=progress)
+    return sampler
+
+
+# --------------------------------------------------------------------------- results
+@dataclass
+class Posterior:
+    """Outcome of :func:`sample_posterior`.
+
+    Attributes:
+        params: Reported quantity → ``median, q16, q84, q2.5, q97.5, mean, std, tau, ess``.
+        diagnostics: ``converged``, ``steps``, ``steps_needed``, ``walkers``, ``burn``,
+            ``thin``, ``acceptance`` (mean), ``acceptance_min``, ``tau`` per sampled
+            coordinate, ``max_tau``, ``log_prob_evals``, ``message``.
+        correlations: ``{"names", "matrix"}`` of the reported quantities.
+        samples: Burnt-in, thinned samples of the reported quantities ``(n, p)``.
+        names: Their names.
+        chain: The full chain in the sampled space ``(steps, walkers, ndim)``.
+        chain_names: Names of the sampled coordinates.
+        record: The record with a ``[posterior]`` table.
+        provenance: Seed, sampler, likelihood, priors, data files with SHA-256, version.
+    """
+
+    params: dict[str, dict]
+    diagnostics: dict[str, Any]
+    correlations: dict[str, Any]
+    samples: np.ndarray
+    names: list[str]
+    chain: np.ndarray = field(repr=False)
+    chain_names: list[str] = field(default_factory=list)
+    record: WhiskerRecord | None = None
+    provenance: dict[str, Any] = field(default_factory=dict)
+    derived_chain: np.ndarray | None = field(default=None, repr=False)
+
+    def to_json(self) -> dict:
+        """The JSON summary (``whiskerid posterior --json``)."""
+        return {
+            "converged": self.diagnostics["converged"],
+            "params": self.params,
+            "tau": self.diagnostics["tau"],
+            "acceptance": self.diagnostics["acceptance"],
+            "ess": {k: v["ess"] for k, v in self.params.items()},
+            "diagnostics": self.diagnostics,
+            "correlations": self.correlations,
+            "provenance": self.provenance,
+        }
+
+
+def derived_quantities(prob: Problem, z: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """Reported quantities (f_1, ζ, κ, EI or C …, σ per recording) at points ``z``."""
+    m = prob.model
+    rec = prob.record
+    nominal = rec.whisker().with_modes(m.problem.n_modes)
+    fn = _cal._derived_fn(
+        m.problem,
+        m.unravel,
+        prob.pin,
+        m.problem.static_x_m is not None,
+        float(nominal.EI),
+        rec.structure,
+    )
+    names = list(fn(jnp.asarray(prob.z0[: m.n_theta]))[1])
+    vals = np.asarray(_derived_batch(fn, jnp.asarray(np.asarray(z)[:, : m.n_theta])))
+    sig = np.exp(np.asarray(z)[:, m.n_theta :]) * np.asarray(prob.y_std)
+    names += [f"sigma_{j + 1}" for j in range(m.n_rec)]
+    return np.concatenate([vals, sig], axis=1), names
+
+
+@eqx.filter_jit
+def _derived_batch(fn, z):
+    return jax.vmap(lambda v: fn(v)[0])(z)
+
+
+def _tau(x: np.ndarray) -> np.ndarray:
+    """Integrated autocorrelation time of a chain ``(steps, walkers, ndim)`` (quiet)."""
+    import logging
+
+    import emcee
+
+    log = logging.getLogger("emcee.autocorr")
+    level = log.level
+    log.setLevel(logging.ERROR)  # the "shorter than 50 tau" verdict is reported by us
+    try:
+        return np.asarray(emcee.autocorr.integrated_time(x, quiet=True), float)
+    except Exception:  # too short for any estimate
+        return np.full(x.shape[2], np.nan)
+    finally:
+        log.setLevel(level)
+
+
+def summarize(prob: Problem, sampler, *, seed: int | None = None) -> Posterior:
+    """Diagnostics, burn-in and thinning from τ, and the summary of the reported quantities."""
+    chain = sampler.get_chain()
+    steps, walkers, ndim = chain.shape
+    tau = _tau(chain)
+    max_tau = float(np.nanmax(tau)) if np.any(np.isfinite(tau)) else float("nan")
+    finite_tau = np.isfinite(max_tau)
+    burn = math.ceil(2 * max_tau) if finite_tau else steps // 2
+    burn = min(burn, steps - 1)
+    min_tau = float(np.nanmin(tau)) if finite_tau else 2.0
+    thin = max(1, int(0.5 * min_tau))
+    needed = math.ceil(50 * max_tau) if finite_tau else None
+    converged = bool(finite_tau and steps >= needed)
+    acc = np.asarray(sampler.acceptance_fraction)
+    derived_full, names = derived_quantities(prob, chain.reshape(-1, ndim))
+    derived_full = derived_full.reshape(steps, walkers, -1)
+    tau_d = _tau(derived_full)
+    kept = derived_full[burn::thin].reshape(-1, derived_full.shape[2])
+    params = {}
+    for i, name in enumerate(names):
+        x = kept[:, i]
+        q = np.percentile(x, [2.5, 16, 50, 84, 97.5])
+        t_i = float(tau_d[i])
+        ess = walkers * (steps - burn) / t_i if np.isfinite(t_i) and t_i > 0 else float("nan")
+        params[name] = {
+            "median": float(q[2]),
+            "q16": float(q[1]),
+            "q84": float(q[3]),
+            "q2.5": float(q[0]),
+            "q97.5": float(q[4]),
+            "mean": float(np.mean(x)),
+            "std": float(np.std(x)),
+            "tau": t_i,
+            "ess": float(ess),
+        }
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = np.corrcoef(kept.T) if kept.shape[0] > 2 else np.eye(len(names))
+    if not finite_tau:
+        msg = f"not converged: {steps} steps are too few for any estimate of tau"
+    elif converged:
+        msg = f"converged: {steps} steps >= 50 max tau = {needed}"
+    else:
+        msg = (
+            f"not converged: {steps} steps < 50 max tau = {needed}; run at least {needed} "
+            f"steps (e.g. resume with {needed - steps} more)"
+        )
+    diagnostics = {
+        "converged": converged,
+        "message": msg,
+        "steps": int(steps),
+        "steps_needed": needed,
+        "walkers": int(walkers),
+        "burn": int(burn),
+        "thin": int(thin),
+        "n_samples": int(kept.shape[0]),
+        "acceptance": float(np.mean(acc)),
+        "acceptance_min": float(np.min(acc)),
+        "tau": {n: float(t) for n, t in zip(prob.names, tau, strict=True)},
+        "max_tau": max_tau,
+        "log_prob_evals": int(steps * walkers),
+    }
+    provenance = _provenance(prob, walkers, seed)
+    post = Posterior(
+        params=params,
+        diagnostics=diagnostics,
+        correlations={"names": names, "matrix": np.round(np.nan_to_num(corr), 6).tolist()},
+        samples=kept,
+        names=names,
+        chain=chain,
+        chain_names=list(prob.names),
+        provenance=provenance,
+        derived_chain=derived_full,
+    )
+    post.record = _updated_record(prob.record, post)
+    return post
+
+
+def _provenance(prob, walkers, seed):
+    import emcee
+
+    from . import __version__
+
+    files = []
+    for o in prob.observations:
+        if o.source and Path(o.source).exists():
+            files.append({"path": str(o.source), "sha256": sha256_of(o.source), "name": o.name})
+    return {
+        "sampler": f"emcee {emcee.__version__} EnsembleSampler (stretch move, vectorize=True)",
+        "seed": -1 if seed is None else int(seed),
+        "walkers": int(walkers),
+        "likelihood": prob.model.likelihood,
+        "nu": prob.nu if prob.model.likelihood == "student" else 0.0,
+        "linear_nuisances": "marginalised analytically (flat prior)"
+        if prob.model.marginal
+        else "sampled (flat prior)",
+        "noise": "unknown sigma per recording, sampled as log sigma",
+        "n_modes": prob.model.problem.n_modes,
+        "pin": prob.pin,
+        "priors": prob.priors,
+        "start": "Laplace approximation of the calibration fit",
+        "data_files": files,
+        "whiskerid_version": __version__,
+        "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
+    }
+
+
+def _updated_record(record: WhiskerRecord, post: Posterior) -> WhiskerRecord:
+    d = post.diagnostics
+    table = {
+        "converged": d["converged"],
+        "message": d["message"],
+        "params": post.params,
+        "diagnostics": {k: v for k, v in d.items() if v is not None},
+        "correlations": post.correlations,
+        "provenance": post.provenance,
+    }
+    extra = dict(record.extra)
+    extra["posterior"] = table
+    return record.replace(extra=extra)
+
+
+def sample_posterior(
+    record: WhiskerRecord,
+    observations: list[Observation] | Observation,
+    *,
+    walkers: int = 32,
+    steps: int = 2000,
+    seed: int = 0,
+    backend: str | Path | None = None,
+    resume: bool = False,
+    progress: bool = False,
+    **setup,
+) -> Posterior:
+    """Posterior of ζ, f_1, κ (EI or C) and the noise, jointly over recordings of one whisker.
+
+    Args:
+        record: The whisker's record (``[prior]`` table optional, see the module docstring).
+        observations: One or more recordings.
+        walkers: emcee walkers.
+        steps: Steps per walker.
+        seed: Makes the run reproducible (start and emcee's random state).
+        backend: HDF5 file to store the chain in (``h5py``).
+        resume: Continue the chain stored in ``backend``.
+        progress: Show emcee's progress bar.
+        **setup: Passed to :func:`setup_posterior` (``likelihood``, ``nu``, ``prior``,
+            ``n_modes``, ``pin``, ``static``, ``marginalize``, ...).
+
+    Returns:
+        A :class:`Posterior` (``diagnostics["converged"]`` says whether the run was long
+        enough: at least 50 autocorrelation times).
+    """
+    prob = setup_posterior(record, observations, **setup)
+    sampler = run_sampler(
+        prob,
+        walkers=walkers,
+        steps=steps,
+        seed=seed,
+        backend=backend,
+        resume=resume,
+        progress=progress,
+    )
+    return summarize(prob, sampler, seed=seed)

@@ -1,0 +1,110 @@
+"""``whiskerid posterior``: emcee posteriors of ζ, f_1, κ (EI or C) from recordings (NOTES §7)."""
+
+import argparse
+import sys
+from pathlib import Path
+
+from ._calibrate import EXCITATIONS, OBSERVABLES, PINS, read_static_test
+from ._calibrate_cli import load_observation
+from ._posterior import LIKELIHOODS, sample_posterior
+from ._record import load_record
+
+
+def add_posterior(sub, command_error) -> None:
+    """Register the ``posterior`` sub-command."""
+    p = sub.add_parser(
+        "posterior",
+        help="posteriors of zeta, f1, kappa (EI or C) with emcee",
+        description=(
+            "Sample the posterior of the calibration model (shared kappa and zeta, own "
+            "nuisances per recording, unknown noise sigma per recording) with emcee, walkers "
+            "started from the calibration's Laplace approximation. Gaussian likelihood with the "
+            "linear nuisances marginalised analytically, or Student-t (--likelihood student) "
+            "with them sampled. Priors from the record's [prior] table (defaults: zeta uniform "
+            "on (0, 0.95), f1_hz log-uniform over a decade either side of the fit, sigma_rel "
+            "log-uniform on [1e-6, 10]). Writes DIR/posterior.toml (the record with a "
+            "[posterior] table), DIR/chain.h5, DIR/corner.png and DIR/trace.png. A run "
+            "shorter than 50 autocorrelation times is reported as not converged."
+        ),
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    p.add_argument("recordings", nargs="+", type=Path, metavar="REC", help="CSV/NPZ/NPY recordings")
+    p.add_argument("--fit", type=Path, required=True, help="record from whiskerid calibrate (TOML)")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--walkers", type=int, default=32, help="emcee walkers")
+    p.add_argument("--steps", type=int, default=3000, help="steps per walker")
+    p.add_argument("--seed", type=int, default=0, help="seed (start and emcee's random state)")
+    p.add_argument("--likelihood", choices=LIKELIHOODS, default="gaussian")
+    p.add_argument("--nu", type=float, default=4.0, help="Student-t degrees of freedom")
+    p.add_argument("--resume", action="store_true", help="continue DIR/chain.h5 by --steps")
+    p.add_argument("--no-plots", action="store_true", help="skip the corner and trace PNGs")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    # Data options, as in `whiskerid calibrate` (read by its load_observation).
+    p.add_argument("--observable", choices=("auto", *OBSERVABLES), default="auto")
+    p.add_argument("--time-col", default="t", help="time column (s)")
+    p.add_argument("--signal-col", help="signal column (the first non-base column by default)")
+    p.add_argument("--scale", type=float, default=1.0, help="multiply the signal by this")
+    p.add_argument("--units-g", action="store_true", help="the signal is acceleration in g")
+    p.add_argument("--excitation", choices=("auto", *EXCITATIONS), default="auto")
+    p.add_argument("--fb", type=float, help="sine excitation frequency (Hz)")
+    p.add_argument("--hb", type=float, help="sine excitation amplitude (m)")
+    p.add_argument("--base-col", help="column with the measured base acceleration (m/s^2)")
+    p.add_argument("--sensor-x", type=float, help="where the signal is read (m from the clamp)")
+    p.add_argument("--fit-gain", action="store_true", help="fit the sensor gain")
+    p.add_argument("--gain-known", action="store_true", help="take the Hall gain from the record")
+    p.add_argument("--static", type=Path, help="static test CSV: force_n, deflection_m[, x_m]")
+    p.add_argument("--pin", choices=PINS, default="auto", help="auto: the fit's pin")
+    p.add_argument("--modes", type=int, help="modes in the model (the fit's by default)")
+    p.add_argument("--t-start", type=float, help="from this time (s); decay: the release")
+    p.add_argument("--t-end", type=float, help="up to this time (s)")
+    p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    p.set_defaults(func=lambda args: _cmd_posterior(args, command_error))
+
+
+def _cmd_posterior(args, command_error) -> dict:
+    if args.out.exists() and not args.out.is_dir():
+        raise command_error(f"--out {args.out} is a file; give a folder")
+    if args.walkers < 2 or args.steps < 1:
+        raise command_error("--walkers must be >= 2 and --steps >= 1")
+    record = load_record(args.fit)
+    obs = [load_observation(p, record, args) for p in args.recordings]
+    static = read_static_test(args.static) if args.static else None
+    args.out.mkdir(parents=True, exist_ok=True)
+    chain = args.out / "chain.h5"
+    if args.resume and not chain.exists():
+        raise command_error(f"--resume: no chain at {chain}")
+    post = sample_posterior(
+        record,
+        obs,
+        walkers=args.walkers,
+        steps=args.steps,
+        seed=args.seed,
+        backend=chain,
+        resume=args.resume,
+        progress=not (args.quiet or args.json),
+        static=static,
+        n_modes=args.modes,
+        pin=args.pin,
+        likelihood=args.likelihood,
+        nu=args.nu,
+    )
+    out_toml = post.record.save(args.out / "posterior.toml")
+    d = post.diagnostics
+    for name in ("f1_hz", "zeta", "kappa", "EI", "C"):
+        if name in post.params:
+            q = post.params[name]
+            print(
+                f"{name} = {q['median']:.5g} (68%: {q['q16']:.5g} .. {q['q84']:.5g}; "
+                f"95%: {q['q2.5']:.5g} .. {q['q97.5']:.5g}), tau {q['tau']:.3g}, "
+                f"ESS {q['ess']:.4g}",
+                file=sys.stderr,
+            )
+    print(f"acceptance {d['acceptance']:.3f}; {d['message']}", file=sys.stderr)
+    out = {**post.to_json(), "out": str(out_toml), "chain": str(chain)}
+    if not args.no_plots:
+        from ._posterior_plot import plot_corner, plot_trace
+
+        out["corner"] = str(plot_corner(args.out / "corner.png", post))
+        out["trace"] = str(plot_trace(args.out / "trace.png", post))
+    print(f"wrote {args.out}", file=sys.stderr)
+    return out
