@@ -14,6 +14,7 @@ as ``fits/cantilever-aluminium-<L>cm.toml``. Prints one JSON object; saves plots
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -99,6 +100,8 @@ def main(argv=None) -> int:
                 file=sys.stderr,
             )
         joint = wi.calibrate(record, obs, n_modes=args.modes)
+        for f in joint.record.extra["fit"]["data_files"]:  # paths relative to the repo root
+            f["path"] = os.path.relpath(f["path"], ROOT)
         joint.record.save(args.fits / f"{record.name}.toml")
         plot_calibration(args.out / f"{record.name}.png", joint)
         f1s = np.array([r["f1_hz"] for r in rows])

@@ -266,3 +266,28 @@ def test_window_model_matches_jax_free_decay():
         float(w.damped_frequencies_hz[0]), rel=1e-6
     )
     assert float(fits.zeta[0]) == pytest.approx(0.04, rel=1e-5)
+
+
+@pytest.mark.slow
+def test_reported_sigma_covers_the_truth_about_68_percent(paper):
+    """30 seeded trials (examples/calibrate_coverage.py runs 200): loose bounds."""
+    rec, f1, zeta = paper
+    start = _off_by_30_percent(rec)
+    hits_f, hits_z = [], []
+    for seed in range(30):
+        sim = wi.simulate(
+            rec,
+            excitation="decay",
+            observable="adc",
+            rate_hz=200,
+            duration_s=10,
+            noise_db=30,
+            seed=500 + seed,
+            tip_deflection_m=2e-3,
+        )
+        obs = wi.Observation(sim.t, sim.signal(), observable="adc", gain=None)
+        p = wi.calibrate(start, obs).params
+        assert abs(p["f1_hz"]["value"] / f1 - 1) < 1e-3
+        hits_f.append(abs(p["f1_hz"]["value"] - f1) <= p["f1_hz"]["std"])
+        hits_z.append(abs(p["zeta"]["value"] - zeta) <= p["zeta"]["std"])
+    assert 0.4 <= np.mean(hits_f) <= 0.95 and 0.4 <= np.mean(hits_z) <= 0.95

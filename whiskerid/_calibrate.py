@@ -52,7 +52,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, Float
 
 from . import _lsq
@@ -379,8 +378,37 @@ def _design(p: _Problem, spec: _Spec, w: Whisker, rec: dict, d: dict, *, profile
     return jnp.concatenate(cols, axis=1), fixed
 
 
+# Eager callers (start values, reweighting, reports) use the compiled form: an eager
+# lax.fori_loop (the eigenvalue bisection) would otherwise recompile at every call.
+_design_eval = eqx.filter_jit(_design)
+
+
 def _rms(x):
     return jax.lax.stop_gradient(jnp.sqrt(jnp.mean(x**2)) + 1e-300)
+
+
+@dataclass(frozen=True)
+class _Unravel:
+    """Flat vector → parameter pytree; hashable by value, so compiled fits are reused
+    across calls with the same problem (e.g. many trials or windows of one shape)."""
+
+    treedef: Any
+    shapes: tuple[tuple[int, ...], ...]
+
+    def __call__(self, flat):
+        leaves, i = [], 0
+        for shape in self.shapes:
+            n = math.prod(shape)
+            leaves.append(flat[i : i + n].reshape(shape))
+            i += n
+        return jax.tree_util.tree_unflatten(self.treedef, leaves)
+
+
+def _ravel(tree):
+    leaves, treedef = jax.tree_util.tree_flatten(tree)
+    shapes = tuple(tuple(int(d) for d in jnp.shape(x)) for x in leaves)
+    flat = jnp.concatenate([jnp.ravel(jnp.asarray(x, dtype=float)) for x in leaves])
+    return flat, _Unravel(treedef, shapes)
 
 
 def _residuals(p: _Problem, unravel, theta_flat, args):
@@ -497,14 +525,14 @@ def calibrate(
 
     # Start: grid over (κ, ζ) with the linear coefficients solved exactly.
     theta0 = _start(problem, args, recs0, obs, nominal, f1_nom, zeta_nom, static)
-    flat0, unravel = ravel_pytree(theta0)
+    flat0, unravel = _ravel(theta0)
     fn = jax.tree_util.Partial(_residuals_entry, problem, unravel)
     res = _fit(fn, flat0, args, solver, max_steps)
     # Weight each block (recording, static test) by its own residual scale, then refit:
     # the blocks are then combined fairly and s² ≈ 1 (a reduced χ²).
     args = _reweight(problem, unravel, res.value, args)
     res = _fit(fn, res.value, args, solver, max_steps)
-    cov, s2 = eqx.filter_jit(_lsq.covariance)(fn, res.value, args)
+    cov, s2 = _covariance_jit(fn, res.value, args)
     cov, s2 = np.asarray(cov), float(s2)
     ok = bool(res.ok) and bool(np.all(np.isfinite(np.diag(cov))))
     status = "ok" if ok else ("non-finite" if not np.isfinite(float(res.cost)) else "not converged")
@@ -542,6 +570,9 @@ def calibrate(
 
 def _residuals_entry(problem, unravel, theta_flat, args):
     return _residuals(problem, unravel, theta_flat, args)
+
+
+_covariance_jit = eqx.filter_jit(_lsq.covariance)
 
 
 @eqx.filter_jit
@@ -644,7 +675,11 @@ def _kappa_from_f1(nominal: Whisker, f1_hz):
 
 def _start(problem, args, recs0, obs, nominal, f1_nom, zeta_nom, static):
     """Best (κ, ζ) on a grid seeded by the data, with exact linear coefficients."""
-    f_cands = list(f1_nom * np.geomspace(0.5, 2.0, 29))
+    # f_1 is searched within a factor 1.6 of the nominal: at low sample rates a higher mode
+    # can alias onto the first (e.g. f_2 = 645 Hz folds to 45 Hz at 200 Hz), and only the
+    # nominal tells these apart; near-ties are broken towards the nominal below.
+    lo, hi = f1_nom / 1.6, f1_nom * 1.6
+    f_cands = list(f1_nom * np.geomspace(1 / 1.6, 1.6, 25))
     z_cands = [zeta_nom * k for k in (0.25, 0.5, 1.0, 2.0, 4.0)]
     for o in obs:
         if o.excitation != "decay":
@@ -652,6 +687,8 @@ def _start(problem, args, recs0, obs, nominal, f1_nom, zeta_nom, static):
         peaks, rate = spectral_peaks(o.t, o.y - np.median(o.y))
         for fp in peaks:
             f_true = unalias(fp, rate, f1_nom)
+            if not lo <= f_true <= hi:
+                continue
             f_cands.append(f_true)
             z = envelope_zeta(o.t, o.y, fp, f_true)
             if z is not None:
@@ -670,13 +707,19 @@ def _start(problem, args, recs0, obs, nominal, f1_nom, zeta_nom, static):
     zeta_u = np.asarray(_lsq.from_interval(jnp.asarray(grid_z), 0.0, ZETA_MAX))
     log_ei0 = math.log(float(nominal.EI))
     costs = np.asarray(
-        jax.lax.map(
-            lambda xz: _profile_cost(problem, args, tuple(sub), xz[0], xz[1], log_ei0),
-            (jnp.asarray(log_kappa), jnp.asarray(zeta_u)),
+        _profile_grid(
+            problem,
+            args,
+            tuple(sub),
+            jnp.asarray(log_kappa),
+            jnp.asarray(zeta_u),
+            jnp.asarray(log_ei0),
         )
     )
     costs = np.where(np.isfinite(costs), costs, np.inf)
-    best = int(np.argmin(costs))
+    # Among (near-)equally good candidates take the one closest to the nominal f_1.
+    near = np.flatnonzero(costs <= costs.min() * 1.02 + 1e-300)
+    best = int(near[np.argmin(np.abs(np.log(grid_f[near] / f1_nom)))])
     nz = problem.n_modes if problem.zeta_per_mode else 1
     theta = {
         "log_kappa": jnp.asarray(log_kappa[best]),
@@ -693,7 +736,7 @@ def _start(problem, args, recs0, obs, nominal, f1_nom, zeta_nom, static):
         theta["static_d0"] = jnp.asarray(float(fit[0]))
     w = _whisker(problem, theta)
     for spec, r0, d in zip(problem.specs, recs0, args["recs"], strict=True):
-        D, _ = _design(problem, spec, w, r0, d, profile=True)
+        D, _ = _design_eval(problem, spec, w, r0, d, profile=True)
         coef = np.linalg.lstsq(np.asarray(D), np.asarray(d["y"]), rcond=None)[0]
         r = dict(r0)
         if spec.forced == "known" and spec.excitation == "sine":
@@ -707,6 +750,13 @@ def _start(problem, args, recs0, obs, nominal, f1_nom, zeta_nom, static):
         r["c"] = jnp.asarray(coef)
         theta["recs"].append(r)
     return theta
+
+
+@eqx.filter_jit
+def _profile_grid(problem, args, steps, log_kappa, zeta_u, log_ei):
+    return jax.lax.map(
+        lambda xz: _profile_cost(problem, args, steps, xz[0], xz[1], log_ei), (log_kappa, zeta_u)
+    )
 
 
 def _profile_cost(problem, args, steps, log_kappa, zeta_u, log_ei):
@@ -729,7 +779,7 @@ def _reweight(problem, unravel, flat, args):
     w = _whisker(problem, theta)
     new = {"recs": []}
     for spec, rec, d in zip(problem.specs, theta["recs"], args["recs"], strict=True):
-        D, g = _design(problem, spec, w, rec, d)
+        D, g = _design_eval(problem, spec, w, rec, d)
         r = D @ rec["c"] + g - d["y"]
         dof = max(r.size - D.shape[1], 1)
         sigma = float(jnp.sqrt(jnp.sum(r**2) / dof))
@@ -740,7 +790,7 @@ def _reweight(problem, unravel, flat, args):
 
 
 # --------------------------------------------------------------------------- reporting
-def _derived_fn(problem, unravel, pin, static, nominal, structure):
+def _derived_fn(problem, unravel, pin, has_static, ei_nominal, structure):
     """θ ↦ dict of reported scalars (for the delta method)."""
 
     def fn(flat):
@@ -755,7 +805,7 @@ def _derived_fn(problem, unravel, pin, static, nominal, structure):
                 out[f"zeta_{i + 1}"] = w.zeta[i]
         else:
             out["zeta"] = w.zeta[0]
-        if static is not None:
+        if has_static:
             out["EI"] = w.EI
             out["rho_a"] = w.rho_a
             if isinstance(structure, CoilSpring):
@@ -763,28 +813,31 @@ def _derived_fn(problem, unravel, pin, static, nominal, structure):
         elif pin == "geometry":
             out["EI"] = w.EI  # = κ ρa with ρa from the record
         else:  # material: EI fixed, ρa (and C) follow from κ
-            rho_a = nominal.EI / w.kappa
+            rho_a = ei_nominal / w.kappa
             out["rho_a"] = rho_a
             if isinstance(structure, CoilSpring):
                 out["C"] = rho_a / (structure.wire_density_kg_m3 * structure.wire_area_m2)
-        if "EI" in out and isinstance(structure, UniformBeam) and static is None:
+        if "EI" in out and isinstance(structure, UniformBeam) and not has_static:
             out["E"] = out["EI"] / structure.second_moment_m4
-        if (
-            "EI" in out
-            and isinstance(structure, CoilSpring)
-            and (static is not None or pin == "geometry")
-        ):
+        if "EI" in out and isinstance(structure, CoilSpring) and (has_static or pin == "geometry"):
             out["G_w"] = out["EI"] / structure.polar_moment_m4
         return jnp.stack(list(out.values())), tuple(out)
 
     return fn
 
 
+@eqx.filter_jit
+def _derived_with_jacobian(problem, unravel, pin, has_static, ei_nominal, structure, flat):
+    fn = _derived_fn(problem, unravel, pin, has_static, ei_nominal, structure)
+    names = fn(flat)[1]
+    return fn(flat)[0], jax.jacfwd(lambda g: fn(g)[0])(flat), names
+
+
 def _report(record, problem, unravel, flat, cov, pin, static, nominal):
     structure = record.structure
-    fn = _derived_fn(problem, unravel, pin, static, nominal, structure)
-    names = fn(flat)[1]
-    values, jac = jax.jit(lambda f: (fn(f)[0], jax.jacfwd(lambda g: fn(g)[0])(f)))(flat)
+    values, jac, names = _derived_with_jacobian(
+        problem, unravel, pin, static is not None, float(nominal.EI), structure, flat
+    )
     dcov = np.asarray(jac) @ cov @ np.asarray(jac).T
     std = np.sqrt(np.maximum(np.diag(dcov), 0.0))
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -849,7 +902,7 @@ def _per_recording(problem, unravel, flat, args, obs):
     w = _whisker(problem, theta)
     out, curves = [], []
     for spec, rec, d, o in zip(problem.specs, theta["recs"], args["recs"], obs, strict=True):
-        D, g = _design(problem, spec, w, rec, d)
+        D, g = _design_eval(problem, spec, w, rec, d)
         model_n = np.asarray(D @ rec["c"] + g)
         y_mean, y_std = float(np.mean(o.y)), float(np.std(o.y))
         model = model_n * y_std + y_mean
