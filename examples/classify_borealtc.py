@@ -8,6 +8,7 @@ Example::
 import argparse
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import whiskerid as wi
@@ -19,7 +20,7 @@ from whiskerid._classify import (
     format_confusion,
     plot_confusion,
 )
-from whiskerid._mlp import PAPER_HIDDEN, TrainConfig
+from whiskerid._mlp import default_config
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -44,9 +45,7 @@ def main() -> None:
             test = wi.split_by_recording(ws, 0.25, seed=s)[1]
             mask = __import__("numpy").isin(ws.recording, test.recording)
             train = ws.subset(~mask)
-            cfg = TrainConfig(
-                hidden=PAPER_HIDDEN if kind == "paper" else TrainConfig().hidden, seed=s
-            )
+            cfg = replace(default_config(kind), seed=s)
             model = fit_on_features(feats[~mask], train, spec, cfg)
             res = evaluate_features(model, feats[mask], ws.subset(mask))
             accs.append(res["accuracy"])

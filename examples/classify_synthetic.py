@@ -11,12 +11,14 @@ import json
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 import whiskerid as wi
 from whiskerid._classify import (
+    _proba_from_features,
     default_spec,
     evaluate_features,
     features_of,
@@ -24,14 +26,28 @@ from whiskerid._classify import (
     format_confusion,
     plot_confusion,
 )
-from whiskerid._mlp import PAPER_HIDDEN, TrainConfig
+from whiskerid._mlp import default_config
 
 
 def _fit_eval(train, test, kind, seed):
     spec = default_spec(train, kind)
-    cfg = TrainConfig(hidden=PAPER_HIDDEN if kind == "paper" else TrainConfig().hidden, seed=seed)
+    cfg = replace(default_config(kind), seed=seed)
     model = fit_on_features(features_of(train, spec), train, spec, cfg)
     return evaluate_features(model, features_of(test, spec), test)
+
+
+def _consecutive(model, feats, test, k):
+    """Accuracy of the mean probability over ``k`` consecutive windows of one recording
+    (non-overlapping groups; what a stream reports after ``k`` s). Per-window is the
+    headline figure; this one is reported next to it."""
+    p = _proba_from_features(model, feats)
+    hits = []
+    for r in np.unique(test.recording):
+        idx = np.flatnonzero(test.recording == r)
+        for lo in range(0, len(idx) - k + 1, k):
+            g = idx[lo : lo + k]
+            hits.append(np.argmax(p[g].mean(axis=0)) == test.labels[g[0]])
+    return round(float(np.mean(hits)), 4)
 
 
 def main() -> None:
@@ -53,13 +69,18 @@ def main() -> None:
     train, test = wi.split_by_recording(ws, 0.25, seed=args.seed)
     result = {"windows": len(ws), "recordings": len(ws.sources), "split_by_recording": {}}
     for kind in ("paper", "fitted"):
-        res = _fit_eval(train, test, kind, args.seed)
-        per_speed = {}
         spec = default_spec(train, kind)
-        model_feats = None
-        for v in np.unique(test.speeds):
-            sub = test.subset(test.speeds == v)
-            per_speed[f"{v:.2f}"] = None if sub is None else len(sub)
+        model = fit_on_features(
+            features_of(train, spec), train, spec, replace(default_config(kind), seed=args.seed)
+        )
+        feats = features_of(test, spec)
+        res = evaluate_features(model, feats, test)
+        res["per_speed"] = {
+            f"{v:.2f}": round(evaluate_features(model, feats[test.speeds == v],
+                                                test.subset(test.speeds == v))["accuracy"], 4)
+            for v in np.unique(test.speeds)
+        }  # fmt: skip
+        res["consecutive_5_windows"] = _consecutive(model, feats, test, 5)
         result["split_by_recording"][kind] = res
         png = plot_confusion(
             args.out / f"confusion_{kind}.png",
@@ -70,18 +91,6 @@ def main() -> None:
         print(f"\n{kind}: accuracy {res['accuracy']:.3f} (split by recording)", file=sys.stderr)
         print(format_confusion(res["confusion"], res["labels"]), file=sys.stderr)
         res["png"] = str(png)
-        del spec, model_feats, per_speed
-    # Per speed: train on all speeds (training recordings), test per speed.
-    for kind in ("paper", "fitted"):
-        spec = default_spec(train, kind)
-        cfg = TrainConfig(hidden=PAPER_HIDDEN if kind == "paper" else TrainConfig().hidden)
-        model = fit_on_features(features_of(train, spec), train, spec, cfg)
-        feats = features_of(test, spec)
-        result["split_by_recording"][kind]["per_speed"] = {
-            f"{v:.2f}": round(evaluate_features(model, feats[test.speeds == v],
-                                                test.subset(test.speeds == v))["accuracy"], 4)
-            for v in np.unique(test.speeds)
-        }  # fmt: skip
     # Leave one speed out: train without speed v, test on v.
     result["leave_one_speed_out"] = {}
     for v in args.holdout_speeds:

@@ -62,9 +62,16 @@ def test_train_save_load_round_trip_and_refusals(tmp_path):
                                rtol=1e-5, atol=1e-6)  # fmt: skip
     label, conf = loaded.predict_window(ws.windows[0])
     assert label in ("low", "high") and 0.5 <= conf <= 1.0
+    p = model.predict_proba(ws.windows[:1])[0]  # the single-window path agrees with the batch
+    assert label == model.labels[int(np.argmax(p))] and abs(conf - p.max()) < 1e-5
+    with pytest.raises(ValueError, match="200 samples"):
+        loaded.predict_window(ws.windows[0][:100])
     head = json.loads((path / "model.json").read_text())
     assert head["labels"] == ["low", "high"] and head["window"] == 200
 
+    (path / "model.json").write_text(json.dumps({**head, "format": "whiskerid.classifier/1"}))
+    with pytest.raises(wi.ModelError, match="retrain"):  # older feature set
+        wi.ClassifierModel.load(path)
     (path / "model.json").write_text(json.dumps({**head, "format": "whiskerid.classifier/99"}))
     with pytest.raises(wi.ModelError, match="incompatible"):
         wi.ClassifierModel.load(path)

@@ -62,3 +62,22 @@ def test_paper_features_are_fft_magnitudes_of_the_standardised_window():
 def test_speed_features_need_a_speed():
     with pytest.raises(ValueError, match="speed"):
         wi.compute_features(wi.FeatureSpec(use_speed=True), np.zeros((1, 200)))
+
+
+def test_envelope_periodicity_finds_impacts_and_slope_follows_the_psd():
+    """Impacts every 0.25 s (joints): the envelope autocorrelation peaks at that lag; a
+    random signal with power ∝ f^-2 has a log-log spectral slope near -2."""
+    spec = wi.FeatureSpec(rate_hz=200.0, window=200)
+    rng = np.random.default_rng(3)
+    x = 0.05 * rng.standard_normal(200)
+    h = np.exp(-np.arange(20) / 3.0) * np.sin(2 * np.pi * 46 * np.arange(20) / 200.0)
+    for start in (10, 60, 110, 160):
+        x[start : start + 20] += h
+    f = np.asarray(wi.compute_features(spec, x[None, :]))[0]
+    env = 6 + spec.n_bands + 2 + 6 + 2 + spec.n_bands // 2  # envelope block
+    assert f[env + 2] > 0.5  # strong periodic envelope
+    assert abs(f[env + 3] - 0.25) < 0.03  # lag 50 samples = a quarter of the window
+    white = rng.standard_normal((64, 400))
+    red = np.fft.irfft(np.fft.rfft(white) / np.maximum(np.arange(201), 1), 400)[:, :200]
+    slope = np.asarray(wi.compute_features(spec, red))[:, 6 + spec.n_bands + 2 + 3]
+    assert -2.6 < float(np.median(slope)) < -1.4

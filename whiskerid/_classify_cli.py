@@ -2,6 +2,7 @@
 
 import argparse
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 from ._features import FEATURE_KINDS
@@ -118,15 +119,15 @@ def _cmd_synth(args) -> dict:
 
 def _cmd_train(args) -> dict:
     from ._classify import load_dataset, train_classifier
-    from ._mlp import PAPER_HIDDEN, TrainConfig
+    from ._mlp import default_config
 
     if args.window <= 0:
         raise CommandError("--window must be positive")
     ws = load_dataset(args.dataset, channel=args.channel, window_s=args.window,
                       hop_s=args.hop, rate_hz=args.rate)  # fmt: skip
-    hidden = tuple(args.hidden) if args.hidden else (
-        PAPER_HIDDEN if args.features == "paper" else TrainConfig().hidden)  # fmt: skip
-    config = TrainConfig(hidden=hidden, seed=args.seed, max_epochs=args.max_epochs)
+    config = replace(default_config(args.features), seed=args.seed, max_epochs=args.max_epochs)
+    if args.hidden:
+        config = replace(config, hidden=tuple(args.hidden))
     hop = None if args.hop is None else round(args.hop * ws.rate_hz)
     model = train_classifier(ws, features=args.features, config=config,
                              use_speed=False if args.no_speed else None,

@@ -68,7 +68,7 @@ class FeatureSpec:
     window: int = 200
     n_bands: int = 16
     n_peaks: int = 3
-    modal_fit: bool = True
+    modal_fit: bool = False
     use_speed: bool = False
     n_spatial_bands: int = 10
     spatial_lo: float = 10.0
@@ -91,8 +91,9 @@ class FeatureSpec:
         """Length of the feature vector."""
         if self.kind == "paper":
             return self.window
-        n = 6 + self.n_bands + 2 + 3 * self.n_peaks + (5 if self.modal_fit else 0)
-        return n + (self.n_spatial_bands + 3 if self.use_speed else 0)
+        n = 6 + self.n_bands + 2 + 6 + 2 + self.n_bands // 2 + 6 + 3 * self.n_peaks + 2
+        n += 5 if self.modal_fit else 0
+        return n + (self.n_spatial_bands + 4 if self.use_speed else 0)
 
     def to_dict(self) -> dict:
         """JSON-able form (model files)."""
@@ -217,11 +218,40 @@ def fit_resonance(freqs: Float[Array, " bins"], power: Float[Array, " bins"], f0
     )
 
 
+def _envelope(z: Float[Array, " window"]) -> Float[Array, " window"]:
+    """Magnitude of the analytic signal (Hilbert envelope) of a zero-mean window."""
+    n = z.shape[-1]
+    h = jnp.zeros(n).at[0].set(1.0).at[1 : (n + 1) // 2].set(2.0)
+    if n % 2 == 0:
+        h = h.at[n // 2].set(1.0)
+    return jnp.abs(jnp.fft.ifft(jnp.fft.fft(z) * h))
+
+
+def _autocorr(x: Float[Array, " window"]) -> Float[Array, " window"]:
+    """Normalised (biased) autocorrelation of a zero-mean sequence, lags ``0 … n-1``."""
+    n = x.shape[-1]
+    f = jnp.fft.rfft(x, 2 * n)
+    ac = jnp.fft.irfft(jnp.abs(f) ** 2, 2 * n)[:n]
+    return ac / jnp.maximum(ac[0], _EPS)
+
+
+def _closed_form_mode(freqs, power, pf, pw):
+    """A resonance read off the spectrum without iterating (fast, for online use).
+
+    Damped frequency = the interpolated dominant peak, ``ζ ≈ Δf/(2 f)`` from its
+    half-power width, and the peak's height above the spectral floor (the median bin).
+    """
+    k = jnp.argmin(jnp.abs(freqs - pf))
+    zeta = jnp.clip(pw / (2 * jnp.maximum(pf, freqs[0])), 0.0, 1.0)
+    return zeta, jnp.log(power[k] + _EPS) - jnp.log(jnp.median(power) + _EPS)
+
+
 def fitted_features(
     spec: FeatureSpec, x: Float[Array, " window"], speed_mps
 ) -> Float[Array, " features"]:
     """The ``fitted`` feature vector of one window (see the module docstring)."""
     nyq = spec.rate_hz / 2
+    n = x.shape[-1]
     x0 = x - jnp.mean(x)
     rms = jnp.maximum(jnp.std(x0), _EPS)
     z = x0 / rms
@@ -238,13 +268,66 @@ def fitted_features(
     edges = jnp.linspace(0.0, nyq, spec.n_bands + 1).at[-1].set(nyq)
     bands = jnp.log(band_energies(freqs, power, edges) + 1e-4)
     total = jnp.maximum(jnp.sum(power), _EPS)
-    centroid = jnp.sum(freqs * power) / total
+    pn = power / total
+    centroid = jnp.sum(freqs * pn)
     flatness = jnp.mean(jnp.log(power + _EPS)) - jnp.log(jnp.mean(power) + _EPS)
+    # Spectral shape: spread, entropy, 85 % roll-off, log-log slope, peak over floor.
+    spread = jnp.sqrt(jnp.sum((freqs - centroid) ** 2 * pn))
+    entropy = -jnp.sum(pn * jnp.log(pn + _EPS)) / jnp.log(pn.shape[0])
+    rolloff = freqs[jnp.argmax(jnp.cumsum(pn) >= 0.85)]
+    lf = jnp.log(freqs)
+    lp = jnp.log(power + 1e-6)
+    lfc = lf - jnp.mean(lf)
+    slope = jnp.sum(lfc * (lp - jnp.mean(lp))) / jnp.sum(lfc**2)
+    resid = jnp.std(lp - jnp.mean(lp) - slope * lfc)
+    peak_floor = jnp.log(jnp.max(power) + _EPS) - jnp.log(jnp.median(power) + _EPS)
+    shape_feats = [spread / nyq, entropy, rolloff / nyq, slope, resid, peak_floor]
+    # Broadband part: a running median over 5 bins removes narrow lines (the drivetrain's
+    # motor tone and harmonics, class-independent) and keeps the terrain's broadband
+    # content; its level, its share of the power and its coarse band shape.
+    m = power.shape[0]
+    padded = jnp.pad(power, 2, mode="edge")
+    broad = jnp.median(jnp.stack([padded[i : i + m] for i in range(5)]), axis=0)
+    b_total = jnp.maximum(jnp.sum(broad), _EPS)
+    b_edges = jnp.linspace(0.0, nyq, spec.n_bands // 2 + 1).at[-1].set(nyq)
+    b_bands = jnp.log(band_energies(freqs, broad, b_edges) + 1e-4)
+    b_level = log_rms + 0.5 * (jnp.log(b_total) - jnp.log(total))
+    broad_feats = [b_level, jnp.log(b_total / total)]
+    # Envelope (impacts of joints, bumps, clods) and periodicity (joints every v/spacing).
+    env = _envelope(z)
+    env_mean = jnp.maximum(jnp.mean(env), _EPS)
+    e0 = env - env_mean
+    env_ac = _autocorr(e0)
+    sig_ac = _autocorr(z)
+    lo = max(round(0.05 * spec.rate_hz), 2)
+    lags = jnp.arange(n)
+    usable = (lags >= lo) & (lags <= n // 2)
+    env_ac_u = jnp.where(usable, env_ac, -jnp.inf)
+    env_lag = jnp.argmax(env_ac_u)
+    env_feats = [
+        jnp.std(env) / env_mean,
+        jnp.log(jnp.mean(e0**4) / jnp.maximum(jnp.mean(e0**2) ** 2, _EPS) + _EPS),
+        env_ac_u[env_lag],
+        env_lag / n,  # lag as a fraction of the window
+        jnp.max(jnp.where(usable, jnp.abs(sig_ac), -jnp.inf)),
+        env_ac[1],
+    ]
     df = spec.rate_hz / spec.window
     amps = jnp.concatenate([jnp.zeros(1), jnp.sqrt(power)])  # bin k at k·df again
     pf, pa, pw = spectral_peaks(amps, df, spec.n_peaks)
     peak_feats = jnp.concatenate([pf / nyq, jnp.log(pa / jnp.sqrt(total) + 1e-6), pw / nyq])
-    parts = [jnp.stack(time_feats), bands, jnp.stack([centroid / nyq, flatness]), peak_feats]
+    parts = [
+        jnp.stack(time_feats),
+        bands,
+        jnp.stack([centroid / nyq, flatness]),
+        jnp.stack(shape_feats),
+        jnp.stack(broad_feats),
+        b_bands,
+        jnp.stack(env_feats),
+        peak_feats,
+    ]
+    zeta_cf, peak_cf = _closed_form_mode(freqs, power, pf[0], pw[0])
+    parts.append(jnp.stack([zeta_cf, peak_cf]))
     if spec.modal_fit:
         fd, zeta, amp, floor, ok = fit_resonance(freqs, power, pf[0])
         parts.append(
@@ -257,7 +340,8 @@ def fitted_features(
         s_bands = jnp.log(band_energies(freqs / v, power, s_edges) + 1e-4)
         parts.append(s_bands)
         parts.append(jnp.stack([jnp.log(jnp.maximum(pf[0], df) / v),
-                                jnp.log(centroid / v), log_rms - 2 * jnp.log(v)]))  # fmt: skip
+                                jnp.log(centroid / v), log_rms - 2 * jnp.log(v),
+                                b_level - 2 * jnp.log(v)]))  # fmt: skip
     return jnp.concatenate(parts)
 
 

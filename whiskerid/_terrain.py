@@ -11,8 +11,9 @@ whisker's Hall sensor is read by an ADS1115 on a Pi at 200 Hz. Each stage is phy
      A is ``G₀ = 16e-6 m³`` with ``w = 2``), high-passed below 0.5 cycles/m (hills do not
      shake a whisker);
    * periodic texture: tile or brick joints (spacing, width, depth; bricks also have a
-     random height step per unit), carpet pile (a few-mm period), sand ripples (a wavelength
-     that wanders by ±15 %);
+     random height step per unit), carpet pile (a few-mm period), sand ripples and the
+     transverse striations of a broom-finished concrete (a shared texture whose wavelength
+     wanders by ±15 %);
    * random discrete bumps: grass tufts and stems, soil clods (Poisson positions, raised
      cosine shapes).
 
@@ -22,7 +23,8 @@ whisker's Hall sensor is read by an ADS1115 on a Pi at 200 Hz. Each stage is phy
    terrain       G₀ (m³)   w     texture                                      f_g    ζ_g    patch
    ============  ========  ====  ==========================================  =====  =====  =====
    flat          0.5e-6    2.0   tile joints every 0.30 m, 3 mm × 0.4 mm      45 Hz  0.12   4 mm
-   cement        2e-6      1.5   expansion joints every 1.5 m, 10 × 4 mm      45 Hz  0.12   4 mm
+   cement        2e-6      1.5   broom striations, 12 mm, 0.3 mm; joints      45 Hz  0.12   4 mm
+                                 every 1.5 m, 10 × 4 mm
    brick         2e-6      2.0   joints every 0.10 m, 5 × 2 mm, steps 1.2 mm  45 Hz  0.12   4 mm
    carpet        1e-6      2.0   pile, 4 mm period, 0.25 mm                   24 Hz  0.35   12 mm
    soft-grass    40e-6     2.2   tufts, 40 per m, 0.5–2 mm high, 8 mm wide    10 Hz  0.5    20 mm
@@ -30,8 +32,12 @@ whisker's Hall sensor is read by an ADS1115 on a Pi at 200 Hz. Each stage is phy
    soft-soil     30e-6     2.0   clods, 8 per m, 3–6 mm high, 25 mm wide      20 Hz  0.35   14 mm
    ============  ========  ====  ==========================================  =====  =====  =====
 
-   A broom-finished cement has a flatter PSD slope (more fine texture) than tiles; brick
-   pavers' main excitation is the height step (lippage) between units.
+   A broom-finished cement has a flatter PSD slope (more fine texture) than tiles, and the
+   broom's transverse striations (a few mm to 15 mm apart, a fraction of a millimetre
+   deep); brick pavers' main excitation is the height step (lippage) between units.
+   (Revised: cement first had only its 1.5 m joints on top of the roughness, so most 1 s
+   windows held no joint and cement differed from brick by the roughness slope alone,
+   which is not what a broom-finished slab looks like.)
    The paper's seventh terrain is called asphalt in its Section IV and soft soil in its
    results; it is modelled here as soft soil.
 
@@ -102,7 +108,8 @@ class TerrainFamily:
         unit_step_m: Standard deviation of the height of each unit between joints (m).
         pile_period_m: Period of a fine periodic texture (carpet pile) (m); 0 for none.
         pile_height_m: Its amplitude (m).
-        ripple_m: Wavelength of sand ripples (m); 0 for none.
+        ripple_m: Wavelength of a texture shared by both tracks (sand ripples, broom
+            striations) (m); 0 for none.
         ripple_height_m: Their amplitude (m).
         bumps_per_m: Mean number of discrete bumps per metre (Poisson).
         bump_height_m: ``(low, high)`` heights (m), uniform.
@@ -138,7 +145,7 @@ TERRAIN_FAMILIES: dict[str, TerrainFamily] = {
         TerrainFamily("flat", 0.5e-6, 2.0, joint_spacing_m=0.30, joint_width_m=0.003,
                       joint_depth_m=0.0004, **_HARD),
         TerrainFamily("cement", 2e-6, 1.5, joint_spacing_m=1.5, joint_width_m=0.010,
-                      joint_depth_m=0.004, **_HARD),
+                      joint_depth_m=0.004, ripple_m=0.012, ripple_height_m=0.0003, **_HARD),
         TerrainFamily("brick", 2e-6, 2.0, joint_spacing_m=0.10, joint_width_m=0.005,
                       joint_depth_m=0.002, unit_step_m=0.0012, **_HARD),
         TerrainFamily("carpet", 1e-6, 2.0, pile_period_m=0.004, pile_height_m=0.00025,
