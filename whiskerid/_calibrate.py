@@ -846,7 +846,9 @@ def _report(record, problem, unravel, flat, cov, pin, static, nominal):
     params = {}
     for i, name in enumerate(names):
         source = "fit"
-        if name in ("EI", "C", "rho_a", "E", "G_w"):
+        if static is not None and name in ("EI", "G_w"):
+            source = "fit (static test)"
+        elif name in ("EI", "C", "rho_a", "E", "G_w"):
             source = (
                 "derived from kappa and the static test"
                 if static is not None
