@@ -10,7 +10,7 @@ Likelihood. ``gaussian`` (default): ``ε ~ N(0, σ_j²)`` with an unknown σ per
 sampled as ``log σ_j``. The linear coefficients are *marginalised analytically*: with a
 flat (improper) prior on ``c`` the integral is closed-form (variable projection),
 ``log L_j = −(n−k) log σ − ½ log|DᵀD| − RSS_min/(2σ²) − (n−k)/2 log 2π``, with ``RSS_min``
-the least-squares residual at ``θ`` (computed by a QR factorisation). ``student``: a
+the least-squares residual at ``θ`` (normal equations, Jacobi-scaled Cholesky). ``student``: a
 Student-t with ``ν`` (default 4) degrees of freedom and scale σ_j for outliers; there is no
 closed form, so ``c`` is sampled with the other parameters (``marginalize=False`` does the
 same for the Gaussian, e.g. for comparisons with samplers that cannot marginalise).
@@ -149,10 +149,14 @@ def _rec_loglik(model, spec, rec, d, w, log_sigma, nu):
     n = y.shape[0]
     sigma = jnp.exp(log_sigma)
     if model.marginal:
-        q, r = jnp.linalg.qr(D)
-        resid = y - q @ (q.T @ y)
+        # Normal equations with Jacobi scaling (k is small); the residual is formed
+        # explicitly (no cancellation in yᵀy − bᵀG⁻¹b).
+        gram = D.T @ D
+        s = jnp.sqrt(jnp.diag(gram))
+        diag, coef = _chol_solve_small(gram / jnp.outer(s, s), (D.T @ y) / s)
+        resid = y - D @ (coef / s)
         k = D.shape[1]
-        logdet = 2 * jnp.sum(jnp.log(jnp.abs(jnp.diag(r))))
+        logdet = 2 * jnp.sum(jnp.log(diag)) + 2 * jnp.sum(jnp.log(s))
         return (
             -(n - k) * log_sigma
             - 0.5 * logdet
@@ -168,6 +172,29 @@ def _rec_loglik(model, spec, rec, d, w, log_sigma, nu):
         - 0.5 * jnp.log(nu * jnp.pi)
     )
     return n * (const - log_sigma) - 0.5 * (nu + 1) * jnp.sum(jnp.log1p(z**2 / nu))
+
+
+def _chol_solve_small(a, b):
+    """Cholesky ``a = L Lᵀ`` and ``a⁻¹ b`` unrolled for a small static size.
+
+    Element by element, so that under ``vmap`` every operation is a vector operation across
+    walkers (XLA's batched LAPACK calls loop over the batch on the CPU and were the larger
+    part of the cost). Returns ``(diag L, a⁻¹ b)``.
+    """
+    k = a.shape[0]
+    L = [[None] * k for _ in range(k)]
+    for j in range(k):
+        d = a[j, j] - sum(L[j][m] ** 2 for m in range(j))
+        L[j][j] = jnp.sqrt(d)
+        for i in range(j + 1, k):
+            L[i][j] = (a[i, j] - sum(L[i][m] * L[j][m] for m in range(j))) / L[j][j]
+    u = []
+    for i in range(k):
+        u.append((b[i] - sum(L[i][m] * u[m] for m in range(i))) / L[i][i])
+    x = [None] * k
+    for i in reversed(range(k)):
+        x[i] = (u[i] - sum(L[m][i] * x[m] for m in range(i + 1, k))) / L[i][i]
+    return jnp.stack([L[i][i] for i in range(k)]), jnp.stack(x)
 
 
 def _log_prior(model, theta, w, log_sigma, args):
@@ -210,9 +237,20 @@ def log_prob_one(model: _Model, z, args):
     return jnp.where(jnp.isfinite(lp), lp, -jnp.inf)
 
 
-@eqx.filter_jit
+_COMPILED: dict = {}
+
+
 def _log_prob_batch(model, z, args):
-    return jax.vmap(lambda zz: log_prob_one(model, zz, args))(z)
+    """Jitted, vmapped log-probability; one compiled function per model (by value), reused
+    across problems of the same structure (plain ``jax.jit``: cheaper dispatch than
+    ``eqx.filter_jit`` on every emcee step)."""
+    fn = _COMPILED.get(model)
+    if fn is None:
+        fn = jax.jit(jax.vmap(lambda zz, a: log_prob_one(model, zz, a), in_axes=(0, None)))
+        if len(_COMPILED) > 64:
+            _COMPILED.clear()
+        _COMPILED[model] = fn
+    return fn(z, args)
 
 
 # --------------------------------------------------------------------------- setup
@@ -248,7 +286,7 @@ class Problem:
     def log_prob(self, z) -> np.ndarray:
         """Log-posterior at points ``z`` of shape ``(ndim,)`` or ``(walkers, ndim)``."""
         z = np.atleast_2d(np.asarray(z, dtype=float))
-        return np.asarray(_log_prob_batch(self.model, jnp.asarray(z), self.args))
+        return np.asarray(_log_prob_batch(self.model, z, self.args))
 
 
 def _drop_c(tree):
