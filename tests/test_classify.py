@@ -1,6 +1,7 @@
 """MLP, model files, evaluation and the classification CLI on a tiny dataset."""
 
 import json
+from dataclasses import replace
 
 import jax
 import numpy as np
@@ -53,7 +54,8 @@ def test_split_by_recording_keeps_recordings_whole():
 
 def test_train_save_load_round_trip_and_refusals(tmp_path):
     ws = _toy_windows()
-    model = wi.train_classifier(ws, config=FAST)
+    model = wi.train_classifier(ws, config=replace(FAST, ensemble=2))
+    assert len(model.nets) == 2
     res = wi.evaluate_classifier(model, ws)
     assert res["accuracy"] > 0.9 and set(res["per_class"]) == {"low", "high"}
     path = model.save(tmp_path / "m")
@@ -68,6 +70,7 @@ def test_train_save_load_round_trip_and_refusals(tmp_path):
         loaded.predict_window(ws.windows[0][:100])
     head = json.loads((path / "model.json").read_text())
     assert head["labels"] == ["low", "high"] and head["window"] == 200
+    assert head["network"]["members"] == 2 and len(loaded.nets) == 2
 
     (path / "model.json").write_text(json.dumps({**head, "format": "whiskerid.classifier/1"}))
     with pytest.raises(wi.ModelError, match="retrain"):  # older feature set
@@ -101,7 +104,7 @@ def test_cli_synth_train_evaluate_classify(tmp_path, capsys):
     assert main(["dataset", "synth", "--out", str(ds), *args]) == 0
     assert len(list(ds.glob("*/*.csv"))) == 4
     assert main(["train", str(ds), "--out", str(model), "--hidden", "16", "16",
-                 "--max-epochs", "40", "--json"]) == 0  # fmt: skip
+                 "--max-epochs", "40", "--ensemble", "1", "--json"]) == 0  # fmt: skip
     out = json.loads(capsys.readouterr().out)
     assert out["labels"] == ["brick", "sand"] and 20 <= out["windows"] <= 24
     assert main(["evaluate", str(model), str(ds), "--json", "--plot", str(tmp_path / "c.png")]) == 0

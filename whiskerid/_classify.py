@@ -232,34 +232,38 @@ class ClassifierModel:
 
     The online stream calls :meth:`predict_window` on each new window of ``window``
     samples at ``rate_hz`` (uniformly resampled), or :meth:`predict_windows` on a batch.
+    ``net`` is one network or a sequence of them (an ensemble: their class probabilities
+    are averaged).
     """
 
-    def __init__(self, spec: FeatureSpec, labels, mean, std, net: MLP, *, hop: int,
-                 channel: str | None = None, info: dict | None = None):  # fmt: skip
+    def __init__(self, spec: FeatureSpec, labels, mean, std, net: "MLP | list[MLP]", *,
+                 hop: int, channel: str | None = None, info: dict | None = None):  # fmt: skip
         self.spec = spec
         self.labels = tuple(labels)
         self.mean = np.asarray(mean, dtype=np.float32)
         self.std = np.asarray(std, dtype=np.float32)
-        self.net = net
+        self.nets = (net,) if isinstance(net, MLP) else tuple(net)
+        self.net = self.nets[0]
         self.hop = int(hop)
         self.channel = channel
         self.info = dict(info or {})
         spec_ = spec
 
         @eqx.filter_jit
-        def proba(net, mean, std, windows, speeds):
+        def proba(nets, mean, std, windows, speeds):
             feats = jax.vmap(lambda w, v: window_features(spec_, w, v))(windows, speeds)
             z = (feats.astype(jnp.float32) - mean) / std
-            return jax.nn.softmax(jax.vmap(net)(z), axis=-1)
+            return sum(jax.nn.softmax(jax.vmap(n)(z), axis=-1) for n in nets) / len(nets)
 
         self._proba = proba
-        params, static = eqx.partition(net, eqx.is_array)
+        params, static = eqx.partition(self.nets, eqx.is_array)
 
         @jax.jit
         def one(params, mean, std, window, speed):
             feats = window_features(spec_, window, speed)
             z = (feats.astype(jnp.float32) - mean) / std
-            return jax.nn.softmax(eqx.combine(params, static)(z))
+            nets = eqx.combine(params, static)
+            return sum(jax.nn.softmax(n(z)) for n in nets) / len(nets)
 
         # Device-resident arguments: a warm call is one dispatch and one small transfer.
         self._one = one
@@ -292,7 +296,7 @@ class ClassifierModel:
         windows = jnp.asarray(windows, dtype=float)
         if windows.ndim != 2 or windows.shape[1] != self.window:
             raise ValueError(f"windows must have shape (n, {self.window}), got {windows.shape}")
-        p = self._proba(self.net, self.mean, self.std, windows, self._speeds(len(windows), speeds))
+        p = self._proba(self.nets, self.mean, self.std, windows, self._speeds(len(windows), speeds))
         return np.asarray(p)
 
     def predict_windows(self, windows, speeds=None) -> tuple[np.ndarray, np.ndarray]:
@@ -360,7 +364,8 @@ class ClassifierModel:
             "labels": list(self.labels),
             "normalisation": {"mean": self.mean.tolist(), "std": self.std.tolist()},
             "network": {"sizes": self.net.sizes, "hidden_activation": "relu",
-                        "output": "softmax"},
+                        "output": "softmax", "members": len(self.nets),
+                        "combine": "mean of the members' probabilities"},
             "training": self.info,
         }  # fmt: skip
 
@@ -368,7 +373,8 @@ class ClassifierModel:
         """Write ``path/model.json`` and ``path/weights.npz``."""
         path = Path(path)
         path.mkdir(parents=True, exist_ok=True)
-        np.savez(path / MODEL_WEIGHTS, **to_arrays(self.net))
+        arrays = {f"m{j}_{k}": a for j, n in enumerate(self.nets) for k, a in to_arrays(n).items()}
+        np.savez(path / MODEL_WEIGHTS, **arrays)
         (path / MODEL_JSON).write_text(json.dumps(self.header(), indent=2) + "\n")
         return path
 
@@ -398,6 +404,9 @@ class ClassifierModel:
             std = np.asarray(head["normalisation"]["std"], dtype=float)
             sizes = [int(s) for s in head["network"]["sizes"]]
             hop = int(head["hop"])
+            members = int(head["network"].get("members", 1))
+            if members < 1:
+                raise ValueError(f"members {members} < 1")
         except (KeyError, TypeError, ValueError) as err:
             raise ModelError(f"{head_file}: corrupt model header ({err!r})") from None
         n = spec.n_features
@@ -411,12 +420,17 @@ class ClassifierModel:
         weights = head_file.parent / MODEL_WEIGHTS
         try:
             with np.load(weights, allow_pickle=False) as z:
-                net = from_arrays({k: z[k] for k in z.files}, sizes)
+                arrays = {k: z[k] for k in z.files}
+            nets = []
+            for j in range(members):
+                prefix = f"m{j}_"
+                mine = {k[len(prefix) :]: a for k, a in arrays.items() if k.startswith(prefix)}
+                nets.append(from_arrays(mine, sizes))
         except FileNotFoundError:
             raise ModelError(f"{weights}: missing model weights") from None
         except (ValueError, OSError, EOFError) as err:
             raise ModelError(f"{weights}: corrupt model weights ({err})") from None
-        return cls(spec, labels, mean, std, net, hop=hop, channel=head.get("channel"),
+        return cls(spec, labels, mean, std, nets, hop=hop, channel=head.get("channel"),
                    info=head.get("training", {}))  # fmt: skip
 
 
@@ -455,17 +469,28 @@ def fit_on_features(
     feats: np.ndarray, ws: WindowSet, spec: FeatureSpec, config: TrainConfig,
     *, val_fraction: float = 0.2,
 ) -> ClassifierModel:  # fmt: skip
-    """Train on precomputed features of ``ws`` (validation: held-out recordings)."""
-    val = grouped_split(ws, val_fraction, config.seed + 1)
-    mean = feats[~val].mean(axis=0)
-    std = np.maximum(feats[~val].std(axis=0), 1e-6 * (np.abs(mean) + 1.0))
+    """Train on precomputed features of ``ws`` (validation: held-out recordings).
+
+    With ``config.ensemble = K > 1``, K networks are trained, each with its own seed and
+    its own validation recordings (so each sees a different part of the data), and their
+    probabilities are averaged.
+    """
+    mean = feats.mean(axis=0)
+    std = np.maximum(feats.std(axis=0), 1e-6 * (np.abs(mean) + 1.0))
     z = (feats - mean) / std
-    res = train_mlp(z[~val], ws.labels[~val], z[val], ws.labels[val], len(ws.label_names), config)
-    info = {"epochs": res.epochs, "best_epoch": res.best_epoch,
-            "val_loss": round(res.best_val_loss, 5), "val_accuracy": round(res.val_accuracy, 4),
-            "train_windows": int((~val).sum()), "val_windows": int(val.sum()),
+    nets, runs = [], []
+    for j in range(max(config.ensemble, 1)):
+        cfg = replace(config, seed=config.seed + 1000 * j)
+        val = grouped_split(ws, val_fraction, cfg.seed + 1)
+        res = train_mlp(z[~val], ws.labels[~val], z[val], ws.labels[val], len(ws.label_names), cfg)
+        nets.append(res.model)
+        runs.append(res)
+    info = {"epochs": sum(r.epochs for r in runs), "best_epoch": runs[0].best_epoch,
+            "val_loss": round(float(np.mean([r.best_val_loss for r in runs])), 5),
+            "val_accuracy": round(float(np.mean([r.val_accuracy for r in runs])), 4),
+            "members": len(nets), "train_windows": int((~val).sum()), "val_windows": int(val.sum()),
             "seed": config.seed, "hidden": list(config.hidden)}  # fmt: skip
-    return ClassifierModel(spec, ws.label_names, mean, std, res.model, hop=ws.windows.shape[1],
+    return ClassifierModel(spec, ws.label_names, mean, std, nets, hop=ws.windows.shape[1],
                            info=info)  # fmt: skip
 
 
@@ -618,7 +643,7 @@ def _proba_from_features(model: ClassifierModel, feats: np.ndarray) -> np.ndarra
     from ._mlp import predict_proba
 
     z = (np.asarray(feats, np.float32) - model.mean) / model.std
-    return np.asarray(predict_proba(model.net, z))
+    return np.mean([np.asarray(predict_proba(n, z)) for n in model.nets], axis=0)
 
 
 def evaluate_features(model: ClassifierModel, feats: np.ndarray, ws: WindowSet) -> dict:

@@ -73,6 +73,8 @@ def add_classify_commands(sub, command_error) -> None:
     t.add_argument("--no-speed", action="store_true", help="do not use speed_mps metadata")
     t.add_argument("--hidden", type=int, nargs="+", help="hidden layer sizes")
     t.add_argument("--max-epochs", type=int, default=300)
+    t.add_argument("--ensemble", type=int, help="networks averaged (3 for fitted, 1 for paper)")
+    t.add_argument("--balance", action="store_true", help="weight classes by inverse frequency")
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     t.set_defaults(func=_cmd_train)
@@ -128,6 +130,12 @@ def _cmd_train(args) -> dict:
     config = replace(default_config(args.features), seed=args.seed, max_epochs=args.max_epochs)
     if args.hidden:
         config = replace(config, hidden=tuple(args.hidden))
+    if args.ensemble is not None:
+        if args.ensemble < 1:
+            raise CommandError("--ensemble must be at least 1")
+        config = replace(config, ensemble=args.ensemble)
+    if args.balance:
+        config = replace(config, balance=True)
     hop = None if args.hop is None else round(args.hop * ws.rate_hz)
     model = train_classifier(ws, features=args.features, config=config,
                              use_speed=False if args.no_speed else None,

@@ -99,6 +99,8 @@ class TrainConfig:
             inputs of every minibatch: a cheap regulariser against memorising recordings.
         label_smoothing: Label smoothing of the cross-entropy targets.
         balance: Weight the loss by inverse class frequency (unbalanced datasets).
+        ensemble: Networks trained (different seeds and validation recordings) whose
+            probabilities a model averages.
     """
 
     hidden: tuple[int, ...] = DEFAULT_HIDDEN
@@ -111,7 +113,8 @@ class TrainConfig:
     seed: int = 0
     input_noise: float = 0.3
     label_smoothing: float = 0.0
-    balance: bool = True
+    balance: bool = False
+    ensemble: int = 1
 
 
 #: The paper pipeline's settings: its five-layer network, no extra regularisation.
@@ -120,9 +123,9 @@ PAPER_CONFIG = TrainConfig(hidden=PAPER_HIDDEN, weight_decay=1e-4, input_noise=0
 
 def default_config(features: str = "fitted") -> TrainConfig:
     """Training settings for a feature pipeline: :data:`PAPER_CONFIG` for ``paper``; for
-    ``fitted`` a small network with weight decay and input noise (chosen on validation
+    ``fitted`` three small networks with weight decay and input noise (chosen on validation
     recordings inside the training data: wider and deeper networks memorised recordings)."""
-    return PAPER_CONFIG if features == "paper" else TrainConfig()
+    return PAPER_CONFIG if features == "paper" else TrainConfig(ensemble=3)
 
 
 @dataclass
