@@ -5,7 +5,7 @@ Synthetic problem: a one-mode free decay of the paper whisker's record, f_1 = 48
 ζ = 0.02, 500 samples at 1 kHz with jittered timestamps, white noise σ = 0.05 (amplitude 1,
 offset 0.3, random phase). Gaussian likelihood, linear nuisances marginalised, default priors.
 
-    .venv/bin/python benchmarks/posterior_checks.py coverage [--datasets 100] [--steps 2000]
+    .venv/bin/python benchmarks/posterior_checks.py coverage [--datasets 100] [--first 0]
     .venv/bin/python benchmarks/posterior_checks.py nuts [--steps 5000]
 """
 
@@ -33,13 +33,18 @@ def decay(seed: int) -> wi.Observation:
     return wi.Observation(t, y + NOISE * rng.standard_normal(N), name=f"decay-{seed}")
 
 
-def coverage(n: int, walkers: int, steps: int) -> dict:
+def coverage(n: int, walkers: int, steps: int, first: int = 0) -> dict:
     levels = {"68": (16, 84), "90": (5, 95), "95": (2.5, 97.5)}
     hits = {k: {"zeta": 0, "f1_hz": 0} for k in levels}
     converged, t0 = 0, time.perf_counter()
     for i in range(n):
         post = P.sample_posterior(
-            wi.paper_record(), decay(1000 + i), n_modes=1, walkers=walkers, steps=steps, seed=i
+            wi.paper_record(),
+            decay(1000 + first + i),
+            n_modes=1,
+            walkers=walkers,
+            steps=steps,
+            seed=first + i,
         )
         converged += post.diagnostics["converged"]
         for name, truth in (("zeta", ZETA), ("f1_hz", F1)):
@@ -50,6 +55,7 @@ def coverage(n: int, walkers: int, steps: int) -> dict:
         print(f"{i + 1}/{n}", file=sys.stderr, end="\r")
     return {
         "datasets": n,
+        "first_seed": first,
         "walkers": walkers,
         "steps": steps,
         "converged_runs": converged,
@@ -106,10 +112,11 @@ def main(argv=None) -> int:
     ap.add_argument("--datasets", type=int, default=100)
     ap.add_argument("--walkers", type=int, default=32)
     ap.add_argument("--steps", type=int, default=2000)
+    ap.add_argument("--first", type=int, default=0, help="first dataset seed (more batches)")
     ap.add_argument("--nuts-samples", type=int, default=20000)
     args = ap.parse_args(argv)
     if args.check == "coverage":
-        res = coverage(args.datasets, args.walkers, args.steps)
+        res = coverage(args.datasets, args.walkers, args.steps, args.first)
     else:
         res = nuts(args.walkers, args.steps, args.nuts_samples)
     print(json.dumps({"check": args.check, **res}, indent=2))
