@@ -6,13 +6,14 @@ warm single-window latency (features + MLP). Prints one JSON object.
 """
 
 import json
+import os
 import time
 
 import numpy as np
 
 import whiskerid as wi
 from whiskerid._classify import default_spec, features_of, fit_on_features
-from whiskerid._mlp import TrainConfig
+from whiskerid._mlp import TrainConfig, default_config
 from whiskerid._terrain import RunSpec
 
 
@@ -34,7 +35,7 @@ def main() -> None:
     feats = features_of(ws, spec)
     feat_s = time.perf_counter() - t0
     t0 = time.perf_counter()
-    model = fit_on_features(feats, ws, spec, TrainConfig())
+    model = fit_on_features(feats, ws, spec, default_config("fitted"))  # 3 members
     train_s = time.perf_counter() - t0
 
     from sklearn.neural_network import MLPClassifier
@@ -64,6 +65,8 @@ def main() -> None:
         "windows": len(ws), "features": spec.n_features, "synthesis_s": round(synth_s, 2),
         "feature_extraction_s_incl_compile": round(feat_s, 2),
         "train_s_incl_compile": round(train_s, 2), "train_epochs": model.info["epochs"],
+        "ensemble_members": model.info["members"],
+        "load_average_1min": round(os.getloadavg()[0], 2), "cpus": os.cpu_count(),
         "sklearn_mlp_train_s": round(sk_s, 2), "sklearn_epochs": int(sk.n_iter_),
         "batched_inference_windows_per_s": round(batch_rate),
         "single_window_latency_ms": {"median": round(1e3 * float(np.median(times)), 3),

@@ -191,8 +191,8 @@ def _classification_stage(out: Path, *, plots: bool, say) -> dict:
     )
     from ._terrain import synthesize_dataset
 
-    say("[+] terrain classification: 7 simulated terrains at 0.2 m/s, 3 runs x 10 s each")
-    synthesize_dataset(out / "terrain", speeds=(0.2,), runs=3, duration_s=10.0, seed=0)
+    say("[+] terrain classification: 7 simulated terrains at 0.2 m/s, 6 runs x 6 s each")
+    synthesize_dataset(out / "terrain", speeds=(0.2,), runs=6, duration_s=6.0, seed=0)
     train, test = split_by_recording(load_dataset(out / "terrain"), 0.34, seed=0)
     model = train_classifier(train)
     model.save(out / "terrain-model")
