@@ -201,7 +201,9 @@ def build_parser() -> argparse.ArgumentParser:
         description=(
             "Differentiable system identification for compliant whisker sensors: beam "
             "models in JAX (the paper's Eq. 1 and the exact modal model), Hall sensor and "
-            "ADS1115 models, simulation. Start with 'whiskerid demo'."
+            "ADS1115 models, simulation, calibration, damping posteriors, terrain "
+            "classification and online streaming on a Raspberry Pi. Start with "
+            "'whiskerid demo'."
         ),
     )
     parser.add_argument("--version", action="version", version=f"whiskerid {__version__}")
