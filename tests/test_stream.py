@@ -58,6 +58,16 @@ def test_gaps_are_interpolated_not_shifted():
     np.testing.assert_allclose(np.diff(window), 100 / 200, atol=1e-9)
 
 
+def test_windows_with_long_gaps_are_skipped_not_guessed():
+    model = ThresholdModel()
+    online = OnlineClassifier(model, hop_s=0.5, min_fill=0.9)
+    t = np.arange(0, 2.0, 1 / 200)
+    keep = (t < 1.1) | (t > 1.3)  # 40 samples (20 %) lost: the windows ending at 1.5 s
+    got = [w for s in _samples(t[keep], 0 * t[keep]) if (w := online.push(s.t_s, s.code))]
+    np.testing.assert_allclose([w.t_end_s for w in got], [1.0], atol=0.006)
+    assert online.skipped_windows == 1  # 1.5 s; the next one (2.0 s) would need t = 2.0
+
+
 def test_run_stream_records_and_stops_on_sigterm(tmp_path):
     model = ThresholdModel()
     recorder = hw.Recorder(tmp_path / "r.csv", columns=("adc",), rate_hz=200, units="code")

@@ -43,17 +43,29 @@ class OnlineClassifier:
             ``window``, ``rate_hz``).
         hop_s: Time between classified windows (s).
         speed_mps: Robot speed, for models that use it.
+        min_fill: Windows holding fewer than this fraction of their samples (lost to I2C
+            errors or overruns) are not classified but counted in ``skipped_windows``:
+            interpolating across long gaps low-passes the window and misleads the features.
         clock: Clock used for latencies (seconds, monotonic).
     """
 
-    def __init__(self, model, *, hop_s: float = 0.5, speed_mps: float | None = None,
-                 clock: Callable[[], float] = time.perf_counter):  # fmt: skip
+    def __init__(
+        self,
+        model,
+        *,
+        hop_s: float = 0.5,
+        speed_mps: float | None = None,
+        min_fill: float = 0.9,
+        clock: Callable[[], float] = time.perf_counter,
+    ):
         if hop_s <= 0:
             raise ValueError(f"hop_s = {hop_s!r} must be positive")
         self.model = model
         self.window_s = model.window / model.rate_hz
         self.hop_s = float(hop_s)
         self.speed = speed_mps
+        self.min_fill = float(min_fill)
+        self.skipped_windows = 0
         self._clock = clock
         # Room for one window plus slack for jitter and a late hop.
         size = int(np.ceil((self.window_s + self.hop_s) * model.rate_hz * 1.5)) + 8
@@ -78,6 +90,10 @@ class OnlineClassifier:
         if t_s < self._next_s:
             return None
         self._next_s += self.hop_s * max(1, np.ceil((t_s - self._next_s) / self.hop_s + 1e-12))
+        in_window = np.count_nonzero(self._t > t_s - self.window_s)
+        if in_window < self.min_fill * self.model.window:
+            self.skipped_windows += 1
+            return None
         window = self._window(t_s)
         label, confidence = self.model.predict_window(window, self.speed)
         return WindowLabel(t_s, label, float(confidence), self._clock() - arrived)
@@ -99,6 +115,7 @@ class StreamSummary:
     windows: list[WindowLabel] = field(default_factory=list)
     gaps: int = 0
     overruns: int = 0
+    skipped_windows: int = 0
     record: str | None = None
     stopped_by: str = "duration"
 
@@ -114,6 +131,7 @@ class StreamSummary:
             "gaps": self.gaps,
             "overruns": self.overruns,
             "windows": len(labels),
+            "skipped_windows": self.skipped_windows,
             "label_counts": counts,
             "majority_label": max(counts, key=counts.get) if counts else None,
             "latency_ms": {"p50": _pct(lat, 50), "p99": _pct(lat, 99)},
@@ -166,6 +184,7 @@ def run_stream(
     except KeyboardInterrupt:
         summary.stopped_by = "signal"
     finally:
+        summary.skipped_windows = online.skipped_windows
         signal.signal(signal.SIGTERM, previous)
         if recorder is not None:
             recorder.close()
