@@ -34,12 +34,12 @@ def run_demo(out: Path, *, plots: bool = True, say=print) -> dict:
     coil = record.structure
     f_n = [float(f) for f in whisker.natural_frequencies_hz]
     say(
-        f"[1/3] {record.name}: EI = {coil.EI:.4g} N m^2, C = {coil.coil_factor:.4g}, "
+        f"[1] {record.name}: EI = {coil.EI:.4g} N m^2, C = {coil.coil_factor:.4g}, "
         f"rho*a = {coil.rho_a:.4g} kg/m"
     )
     say("      natural frequencies (Hz): " + ", ".join(f"{f:.1f}" for f in f_n))
 
-    say("[2/3] modal analysis, 1 s at 20 kHz, sensor at x_s = 5 mm (peaks in Hz)")
+    say("[2] modal analysis, 1 s at 20 kHz, sensor at x_s = 5 mm (peaks in Hz)")
     t = np.arange(20_000) / 20_000.0
     modal = []
     cases = {"paper": [], "exact": []}
@@ -58,7 +58,7 @@ def run_demo(out: Path, *, plots: bool = True, say=print) -> dict:
             f"paper Eq. 1 {row['paper']['peaks_hz']}, exact steady state {row['exact']['peaks_hz']}"
         )
 
-    say("[3/3] what the Pi records: Hall sensor + ADS1115 (475 SPS) polled at 200 Hz, 5 s")
+    say("[3] what the Pi records: Hall sensor + ADS1115 (475 SPS) polled at 200 Hz, 5 s")
     recordings = {}
     for label, kwargs in (
         ("sine30hz", {"excitation": "sine", "fb_hz": 30.0, "hb_m": 2e-4}),
@@ -115,7 +115,7 @@ def _calibration_stage(out: Path, record, *, plots: bool, say) -> dict:
 
     from ._calibrate import Observation, calibrate
 
-    say("[+] calibration: a pluck recorded by the ADS1115 at 200 Hz (10 s, SNR 30 dB), fitted")
+    say("[4] calibration: a pluck recorded by the ADS1115 at 200 Hz (10 s, SNR 30 dB), fitted")
     say("    from a nominal record 30 % off (start values from the data)")
     sim = simulate(
         record,
@@ -160,7 +160,7 @@ def _stream_stage(out: Path, model_dir: Path, *, say, terrain: str = "brick") ->
     from ._classify import ClassifierModel
     from ._stream import OnlineClassifier, open_recorder, run_stream, terrain_source
 
-    say(f"[+] online stream: emulated ADS1115 fed by the simulator on {terrain} at 0.2 m/s, 10 s")
+    say(f"[6] online stream: emulated ADS1115 fed by the simulator on {terrain} at 0.2 m/s, 10 s")
     clock = hw.FakeClock()
     timing = {"clock": clock.now_ns, "sleep": clock.sleep}
     source = terrain_source(paper_record(), terrain, 0.2, 12.0, seed=5)
@@ -191,7 +191,7 @@ def _classification_stage(out: Path, *, plots: bool, say) -> dict:
     )
     from ._terrain import synthesize_dataset
 
-    say("[+] terrain classification: 7 simulated terrains at 0.2 m/s, 6 runs x 6 s each")
+    say("[5] terrain classification: 7 simulated terrains at 0.2 m/s, 6 runs x 6 s each")
     synthesize_dataset(out / "terrain", speeds=(0.2,), runs=6, duration_s=6.0, seed=0)
     train, test = split_by_recording(load_dataset(out / "terrain"), 0.34, seed=0)
     model = train_classifier(train)
