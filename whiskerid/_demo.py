@@ -1,13 +1,14 @@
 """``whiskerid demo``: the main job end to end on embedded defaults.
 
-Stages (later work adds calibration and posteriors):
+Stages (a posterior stage is left out: compiling it would double the demo's time):
 
 1. the paper's whisker: equivalent-beam values and natural frequencies;
 2. the paper's modal analysis (Eq. 1 and the exact modal model) at h_b = 0.1/0.3 mm and
    f_b = 100/300 Hz, 1 s at 20 kHz, with dominant spectral peaks;
 3. what the Pi records (Hall sensor + ADS1115 at 200 Hz) for a 30 Hz sine and a pluck;
-4. terrain classification: a small simulated dataset, trained and tested by recording;
-5. the Pi's online loop on an emulated ADS1115: sample, classify every 0.5 s, record.
+4. calibration of a simulated pluck from a record 30 % off;
+5. terrain classification: a small simulated dataset, trained and tested by recording;
+6. the Pi's online loop on an emulated ADS1115: sample, classify every 0.5 s, record.
 """
 
 from pathlib import Path
