@@ -41,6 +41,24 @@ def add_calibrate(sub, command_error) -> None:
     p.add_argument("recordings", nargs="+", type=Path, metavar="REC", help="CSV/NPZ/NPY recordings")
     p.add_argument("--whisker", type=Path, required=True, help="the whisker's record (TOML)")
     p.add_argument("--out", type=Path, required=True, help="calibrated record to write (TOML)")
+    add_data_options(p)
+    p.add_argument(
+        "--pin",
+        choices=PINS,
+        default="auto",
+        help="what fixes EI or C without a static test (auto = geometry)",
+    )
+    p.add_argument("--modes", type=int, default=2, help="modes in the model")
+    p.add_argument("--zeta-per-mode", action="store_true", help="one zeta per mode")
+    p.add_argument("--solver", choices=SOLVERS, default="levenberg-marquardt")
+    p.add_argument("--plot", type=Path, help="save data, fit and residuals as this PNG")
+    p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    p.set_defaults(func=lambda args: _cmd_calibrate(args, command_error))
+
+
+def add_data_options(p: argparse.ArgumentParser) -> None:
+    """What the recordings hold and which part to use: the options :func:`load_observation`
+    reads (shared by ``calibrate`` and ``posterior``)."""
     p.add_argument(
         "--observable",
         choices=("auto", *OBSERVABLES),
@@ -74,23 +92,11 @@ def add_calibrate(sub, command_error) -> None:
     p.add_argument("--gain-known", action="store_true", help="take the Hall gain from the record")
     p.add_argument("--static", type=Path, help="static test CSV: force_n, deflection_m[, x_m]")
     p.add_argument(
-        "--pin",
-        choices=PINS,
-        default="auto",
-        help="what fixes EI or C without a static test (auto = geometry)",
-    )
-    p.add_argument("--modes", type=int, default=2, help="modes in the model")
-    p.add_argument("--zeta-per-mode", action="store_true", help="one zeta per mode")
-    p.add_argument("--solver", choices=SOLVERS, default="levenberg-marquardt")
-    p.add_argument(
         "--t-start",
         type=float,
-        help="fit from this time (s); decay: the release is detected by default",
+        help="use samples from this time (s); decay: the release is detected by default",
     )
-    p.add_argument("--t-end", type=float, help="fit up to this time (s)")
-    p.add_argument("--plot", type=Path, help="save data, fit and residuals as this PNG")
-    p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
-    p.set_defaults(func=lambda args: _cmd_calibrate(args, command_error))
+    p.add_argument("--t-end", type=float, help="use samples up to this time (s)")
 
 
 def _observable(args, rec, col: str) -> str:

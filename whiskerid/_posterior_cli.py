@@ -4,8 +4,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from ._calibrate import EXCITATIONS, OBSERVABLES, PINS, read_static_test
-from ._calibrate_cli import load_observation
+from ._calibrate import PINS, read_static_test
+from ._calibrate_cli import add_data_options, load_observation
 from ._posterior import LIKELIHOODS, sample_posterior
 from ._record import load_record
 
@@ -40,23 +40,9 @@ def add_posterior(sub, command_error) -> None:
     p.add_argument("--no-plots", action="store_true", help="skip the corner and trace PNGs")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     # Data options, as in `whiskerid calibrate` (read by its load_observation).
-    p.add_argument("--observable", choices=("auto", *OBSERVABLES), default="auto")
-    p.add_argument("--time-col", default="t", help="time column (s)")
-    p.add_argument("--signal-col", help="signal column (the first non-base column by default)")
-    p.add_argument("--scale", type=float, default=1.0, help="multiply the signal by this")
-    p.add_argument("--units-g", action="store_true", help="the signal is acceleration in g")
-    p.add_argument("--excitation", choices=("auto", *EXCITATIONS), default="auto")
-    p.add_argument("--fb", type=float, help="sine excitation frequency (Hz)")
-    p.add_argument("--hb", type=float, help="sine excitation amplitude (m)")
-    p.add_argument("--base-col", help="column with the measured base acceleration (m/s^2)")
-    p.add_argument("--sensor-x", type=float, help="where the signal is read (m from the clamp)")
-    p.add_argument("--fit-gain", action="store_true", help="fit the sensor gain")
-    p.add_argument("--gain-known", action="store_true", help="take the Hall gain from the record")
-    p.add_argument("--static", type=Path, help="static test CSV: force_n, deflection_m[, x_m]")
+    add_data_options(p)
     p.add_argument("--pin", choices=PINS, default="auto", help="auto: the fit's pin")
     p.add_argument("--modes", type=int, help="modes in the model (the fit's by default)")
-    p.add_argument("--t-start", type=float, help="from this time (s); decay: the release")
-    p.add_argument("--t-end", type=float, help="up to this time (s)")
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.set_defaults(func=lambda args: _cmd_posterior(args, command_error))
 
