@@ -174,17 +174,28 @@ def test_kill_9_mid_run_leaves_a_readable_recording(tiny_model, tmp_path):
         "--quiet",
     ]
     proc = subprocess.Popen(cmd, stderr=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
+    seen = 0
     try:
         deadline = time.monotonic() + 120
         while time.monotonic() < deadline:  # wait for about 3 s of data on disk
-            if rec.exists() and rec.read_text().count("\n") > 600:
+            seen = _complete_data_rows(rec)
+            if seen >= 600:
                 break
             time.sleep(0.2)
         else:
-            pytest.fail("the stream never wrote 3 s of data")
+            pytest.fail(f"the stream wrote only {seen} rows in 120 s")
     finally:
         proc.kill()  # SIGKILL: no chance to close or flush
         proc.wait()
     got = hw.read_recording_csv(rec)
-    assert got.t.size >= 600
+    # Everything flushed before the kill is still there (the writer may have added more).
+    assert got.t.size >= seen >= 600
     assert np.all(np.diff(got.t) > 0)
+
+
+def _complete_data_rows(path):
+    """Rows ending in a newline that are neither metadata (``#``) nor the column header."""
+    if not path.exists():
+        return 0
+    lines = path.read_text().split("\n")[:-1]  # the last piece is torn or empty
+    return sum(1 for line in lines if line and not line.startswith(("#", "t,")))
