@@ -5,6 +5,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 import numpy as np
@@ -13,7 +14,7 @@ import pytest
 import whiskerid as wi
 from whiskerid import hw
 from whiskerid._cli import main
-from whiskerid._stream import OnlineClassifier, run_stream
+from whiskerid._stream import BackgroundClassifier, OnlineClassifier, run_stream
 
 
 class ThresholdModel:
@@ -83,6 +84,75 @@ def test_run_stream_records_and_stops_on_sigterm(tmp_path):
     assert recorder.closed
     rec = wi.read_recording(tmp_path / "r.csv")
     assert rec.t.size == 300 and rec.meta["units"] == "code"
+
+
+class SlowModel(ThresholdModel):
+    """ThresholdModel that blocks until released: a model slower than the sample period."""
+
+    def __init__(self):
+        super().__init__()
+        self.release = threading.Event()
+        self.threads = set()
+
+    def predict_window(self, samples, speed=None):
+        self.threads.add(threading.current_thread().name)
+        assert self.release.wait(10)
+        return super().predict_window(samples, speed)
+
+
+def test_background_labels_equal_inline_labels_in_order():
+    t = np.arange(0, 6.0, 1 / 200)
+    x = np.where((t // 1.3) % 2 == 0, 0.0, 10 * np.sin(2 * np.pi * 20 * t))
+
+    def paced():  # 5x real time: a window every 20 ms, ample for this model
+        for s in _samples(t, x):
+            time.sleep(0.001)
+            yield s
+
+    inline = run_stream(_samples(t, x), OnlineClassifier(ThresholdModel()), background=False)
+    threaded = run_stream(paced(), OnlineClassifier(ThresholdModel()), background=True)
+    assert len(inline.windows) == 10
+    assert [(w.t_end_s, w.label) for w in threaded.windows] == [
+        (w.t_end_s, w.label) for w in inline.windows
+    ]
+    assert threaded.dropped_windows == 0
+
+
+def test_a_slow_model_never_holds_up_the_sampling_loop():
+    model = SlowModel()
+    online = OnlineClassifier(model, hop_s=0.5)
+    labels = []
+    previous = sys.getswitchinterval()
+    worker = BackgroundClassifier(online, labels.append, max_pending=2).start()
+    assert sys.getswitchinterval() == pytest.approx(5e-4)
+    t = np.arange(0, 4.0, 1 / 200)
+    submitted = []
+    t0 = time.perf_counter()
+    for s in _samples(t, 0 * t):  # the model is stuck: cutting and submitting must not wait
+        if (p := online.cut(s.t_s, s.code)) is not None:
+            submitted.append(worker.submit(p))
+    assert time.perf_counter() - t0 < 5.0  # 800 samples; a blocking put would hang 10 s
+    # Windows at 1.0, 1.5, ..., 3.5 s: one taken by the worker, two queued, the rest dropped.
+    assert len(submitted) == 6 and worker.dropped == submitted.count(False) >= 2
+    model.release.set()
+    worker.close()
+    assert sys.getswitchinterval() == previous
+    assert len(labels) == submitted.count(True) and model.threads == {"whiskerid-classify"}
+    assert all(w.latency_s > 0 for w in labels)
+
+
+def test_a_failing_model_is_reported_not_swallowed(tmp_path):
+    class Broken(ThresholdModel):
+        def predict_window(self, samples, speed=None):
+            raise FloatingPointError("weights are NaN")
+
+    recorder = hw.Recorder(tmp_path / "r.csv", columns=("adc",), rate_hz=200, units="code")
+    t = np.arange(0, 3.0, 1 / 200)
+    with pytest.raises(RuntimeError, match="classifier thread failed") as info:
+        run_stream(_samples(t, 0 * t), OnlineClassifier(Broken()), recorder=recorder)
+    assert isinstance(info.value.__cause__, FloatingPointError)
+    assert recorder.closed  # what was recorded is kept
+    assert wi.read_recording(tmp_path / "r.csv").t.size > 0
 
 
 @pytest.fixture(scope="module")

@@ -172,7 +172,9 @@ def _stream_stage(out: Path, model_dir: Path, *, say, terrain: str = "brick") ->
     path = out / "stream.csv"
     path.unlink(missing_ok=True)
     recorder = open_recorder(path, rate_hz=200.0, meta={"terrain": terrain, "source": "demo"})
-    result = run_stream(sampler.samples(duration_s=10.0), online, recorder=recorder)
+    # Virtual clock: nothing waits, so the model runs inline rather than on a worker thread.
+    samples = sampler.samples(duration_s=10.0)
+    result = run_stream(samples, online, recorder=recorder, background=False)
     summary = result.to_dict(truth=terrain)
     say(f"      {summary['samples']} samples, {summary['windows']} windows: "
         f"{summary['label_counts']}; {summary['fraction_correct']:.0%} labelled {terrain}; "

@@ -7,9 +7,17 @@ the model's uniform grid (timestamps are real, gaps happen) and classified, givi
 a confidence and the window-to-label latency. A :class:`whiskerid.hw.Recorder` can write the
 stream to CSV with periodic fsync, so a crash leaves a readable file. Ctrl-C or SIGTERM stop
 the stream cleanly: files are closed and a summary is printed.
+
+In real time the model runs on a worker thread (:class:`BackgroundClassifier`): the sampling
+loop only cuts the window (an interpolation of a few hundred samples) and goes back to its
+schedule, so a slow model (a Pi is several times slower than a desktop) costs label latency,
+not samples.
 """
 
+import queue
 import signal
+import sys
+import threading
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
@@ -33,6 +41,21 @@ class WindowLabel:
     label: str
     confidence: float
     latency_s: float
+
+
+@dataclass(frozen=True)
+class PendingWindow:
+    """A window cut from the ring buffer, waiting for the model.
+
+    Attributes:
+        t_end_s: Time of the window's last sample (s since the stream started).
+        samples: The window on the model's uniform grid.
+        arrived_s: Clock reading when its last sample arrived (for the latency).
+    """
+
+    t_end_s: float
+    samples: np.ndarray
+    arrived_s: float
 
 
 class OnlineClassifier:
@@ -80,7 +103,16 @@ class OnlineClassifier:
         self.model.predict_window(np.zeros(self.model.window), self.speed)
 
     def push(self, t_s: float, value: float) -> WindowLabel | None:
-        """Add a sample; return a label when a window is due, else None."""
+        """Add a sample; return a label when a window is due, else None (model run inline)."""
+        pending = self.cut(t_s, value)
+        return None if pending is None else self.classify(pending)
+
+    def cut(self, t_s: float, value: float) -> PendingWindow | None:
+        """Add a sample; return the window to classify when one is due, else None.
+
+        Cheap (a ring-buffer write, and every hop an interpolation onto the model's grid):
+        this is all the sampling loop does when the model runs on a worker thread.
+        """
         arrived = self._clock()
         i = self._n % self._t.size
         self._t[i], self._x[i] = t_s, value
@@ -94,9 +126,13 @@ class OnlineClassifier:
         if in_window < self.min_fill * self.model.window:
             self.skipped_windows += 1
             return None
-        window = self._window(t_s)
-        label, confidence = self.model.predict_window(window, self.speed)
-        return WindowLabel(t_s, label, float(confidence), self._clock() - arrived)
+        return PendingWindow(t_s, self._window(t_s), arrived)
+
+    def classify(self, pending: PendingWindow) -> WindowLabel:
+        """Run the model on a cut window (features + MLP)."""
+        label, confidence = self.model.predict_window(pending.samples, self.speed)
+        latency = self._clock() - pending.arrived_s
+        return WindowLabel(pending.t_end_s, label, float(confidence), latency)
 
     def _window(self, t_end: float) -> np.ndarray:
         order = np.argsort(self._t)
@@ -104,6 +140,87 @@ class OnlineClassifier:
         keep = np.isfinite(t)
         grid = t_end - self.window_s + 1.0 / self.model.rate_hz + self._grid
         return np.interp(grid, t[keep], x[keep])
+
+
+class BackgroundClassifier:
+    """Run :meth:`OnlineClassifier.classify` on a worker thread, fed through a short queue.
+
+    The sampling thread hands over cut windows with :meth:`submit` and never waits: when the
+    model falls so far behind that ``max_pending`` windows are queued, the new window is
+    dropped and counted (``dropped``), never the samples. While the worker runs, the
+    interpreter's switch interval is shortened (``switch_interval_s``) so that the sampling
+    thread gets the GIL back within a fraction of a sample period when its sleep ends; the
+    previous interval is restored by :meth:`close`.
+
+    Args:
+        online: The classifier that owns the ring buffer and the model.
+        on_label: Called on the worker thread with each :class:`WindowLabel`.
+        max_pending: Windows that may wait for the model.
+        switch_interval_s: GIL switch interval while running (Python's default is 5 ms,
+            as long as a sample period at 200 Hz).
+    """
+
+    def __init__(
+        self,
+        online: OnlineClassifier,
+        on_label: Callable[[WindowLabel], None],
+        *,
+        max_pending: int = 4,
+        switch_interval_s: float = 5e-4,
+    ):
+        self.online = online
+        self.on_label = on_label
+        self.dropped = 0
+        self._queue: queue.Queue = queue.Queue(maxsize=max_pending)
+        self._error: BaseException | None = None
+        self._switch = switch_interval_s
+        self._previous_switch: float | None = None
+        self._thread = threading.Thread(target=self._run, name="whiskerid-classify", daemon=True)
+
+    def start(self) -> "BackgroundClassifier":
+        """Start the worker thread."""
+        self._previous_switch = sys.getswitchinterval()
+        sys.setswitchinterval(self._switch)
+        self._thread.start()
+        return self
+
+    def submit(self, pending: PendingWindow) -> bool:
+        """Queue a window without waiting; False (and counted) if the queue is full."""
+        if self._error is not None:
+            raise RuntimeError("the classifier thread failed") from self._error
+        try:
+            self._queue.put_nowait(pending)
+        except queue.Full:
+            self.dropped += 1
+            return False
+        return True
+
+    def _run(self) -> None:
+        while (pending := self._queue.get()) is not None:
+            try:
+                self.on_label(self.online.classify(pending))
+            except BaseException as e:  # reported by submit() and close(), not lost
+                self._error = e
+                return
+
+    def close(self, timeout_s: float = 10.0) -> None:
+        """Classify what is queued, stop the worker (waiting at most ``timeout_s``).
+
+        Raises:
+            RuntimeError: If the worker failed (the original error is the cause) or did not
+                finish within ``timeout_s``.
+        """
+        try:
+            if self._thread.is_alive():
+                self._queue.put(None, timeout=timeout_s)
+                self._thread.join(timeout_s)
+        finally:
+            if self._previous_switch is not None:
+                sys.setswitchinterval(self._previous_switch)
+        if self._error is not None:
+            raise RuntimeError("the classifier thread failed") from self._error
+        if self._thread.is_alive():
+            raise RuntimeError(f"the classifier thread did not finish within {timeout_s} s")
 
 
 @dataclass
@@ -116,6 +233,7 @@ class StreamSummary:
     gaps: int = 0
     overruns: int = 0
     skipped_windows: int = 0
+    dropped_windows: int = 0
     record: str | None = None
     stopped_by: str = "duration"
 
@@ -132,6 +250,7 @@ class StreamSummary:
             "overruns": self.overruns,
             "windows": len(labels),
             "skipped_windows": self.skipped_windows,
+            "dropped_windows": self.dropped_windows,
             "label_counts": counts,
             "majority_label": max(counts, key=counts.get) if counts else None,
             "latency_ms": {"p50": _pct(lat, 50), "p99": _pct(lat, 99)},
@@ -156,11 +275,24 @@ def run_stream(
     *,
     recorder=None,
     on_label: Callable[[WindowLabel], None] | None = None,
+    background: bool = True,
 ) -> StreamSummary:
     """Feed samples (``hw.Sample``: ``t_s``, ``code``, ``volts``) to the classifier.
 
     The model's channel decides what is fed: ``adc`` codes (default) or volts. SIGTERM is
     turned into a clean stop, like Ctrl-C.
+
+    Args:
+        samples: The sample stream (e.g. ``Sampler.samples(duration_s=...)``).
+        online: Ring buffer, windowing and model.
+        recorder: Optional :class:`whiskerid.hw.Recorder`; closed at the end.
+        on_label: Called with each label (on the worker thread when ``background``).
+        background: Run the model on a worker thread (:class:`BackgroundClassifier`), so the
+            sampling loop never waits for it: right for a real-time clock. ``False`` runs it
+            inline, one window at a time (a virtual clock, where nothing waits anyway).
+
+    Returns:
+        The summary; labels in time order.
     """
     summary = StreamSummary(record=None if recorder is None else str(recorder.path))
     use_volts = getattr(online.model, "channel", None) in ("voltage", "volts")
@@ -169,6 +301,12 @@ def run_stream(
     def _terminate(signum, frame):
         raise KeyboardInterrupt
 
+    def _labelled(label: WindowLabel) -> None:
+        summary.windows.append(label)
+        if on_label is not None:
+            on_label(label)
+
+    worker = BackgroundClassifier(online, _labelled).start() if background else None
     signal.signal(signal.SIGTERM, _terminate)
     try:
         for s in samples:
@@ -176,18 +314,25 @@ def run_stream(
             summary.duration_s = s.t_s
             if recorder is not None:
                 recorder.write(s.t_s, s.code)
-            label = online.push(s.t_s, s.volts if use_volts else s.code)
-            if label is not None:
-                summary.windows.append(label)
-                if on_label is not None:
-                    on_label(label)
+            pending = online.cut(s.t_s, s.volts if use_volts else s.code)
+            if pending is None:
+                continue
+            if worker is not None:
+                worker.submit(pending)
+            else:
+                _labelled(online.classify(pending))
     except KeyboardInterrupt:
         summary.stopped_by = "signal"
     finally:
-        summary.skipped_windows = online.skipped_windows
         signal.signal(signal.SIGTERM, previous)
-        if recorder is not None:
-            recorder.close()
+        try:
+            if worker is not None:
+                worker.close()
+                summary.dropped_windows = worker.dropped
+        finally:
+            summary.skipped_windows = online.skipped_windows
+            if recorder is not None:
+                recorder.close()
     return summary
 
 
