@@ -35,7 +35,7 @@ def main() -> None:
     feats = features_of(ws, spec)
     feat_s = time.perf_counter() - t0
     t0 = time.perf_counter()
-    model = fit_on_features(feats, ws, spec, default_config("fitted"))  # 3 members
+    model = fit_on_features(feats, ws, spec, default_config("fitted"))
     train_s = time.perf_counter() - t0
 
     from sklearn.neural_network import MLPClassifier
