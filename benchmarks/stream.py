@@ -62,6 +62,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--speed", type=float, default=0.2, help="robot speed with --model (m/s)")
     p.add_argument("--hop", type=float, default=0.5, help="seconds between windows")
     p.add_argument("--inline", action="store_true", help="run the model in the sampling loop")
+    p.add_argument(
+        "--extra-model-ms",
+        type=float,
+        default=0.0,
+        help="busy Python work added to every window (ms), as a slower CPU such as a Pi's "
+        "would spend on features + MLP",
+    )
     args = p.parse_args(argv)
 
     def sine(t):
@@ -77,6 +84,8 @@ def main(argv: list[str] | None = None) -> int:
         online.warm_up()
         sine = terrain_source(paper_record(), args.terrain, args.speed, args.duration + 2.0)
         terrain_index = list(online.model.labels).index(args.terrain)
+        if args.extra_model_ms > 0:
+            online.model = _Slower(online.model, args.extra_model_ms * 1e-3)
     # Labels go into preallocated arrays, so that memory growth shows the stream's own.
     max_windows = math.ceil(args.duration / args.hop) + 8
     latency_s = np.zeros(max_windows)
@@ -217,6 +226,7 @@ def main(argv: list[str] | None = None) -> int:
             ),
         },
         "classifier": None if online is None else ("inline" if worker is None else "thread"),
+        "extra_model_ms": args.extra_model_ms,
         "window_to_label_latency_ms": _latency(latency_s[:n_labels]),
         "windows": n_labels,
         "skipped_windows": None if online is None else online.skipped_windows,
@@ -230,6 +240,22 @@ def main(argv: list[str] | None = None) -> int:
     }
     print(json.dumps(result))
     return 0
+
+
+class _Slower:
+    """A model that spends ``extra_s`` more per window, busy in Python (holding the GIL)."""
+
+    def __init__(self, model, extra_s: float):
+        self._model, self._extra_s = model, extra_s
+
+    def __getattr__(self, name):
+        return getattr(self._model, name)
+
+    def predict_window(self, samples, speed=None):
+        end = time.perf_counter() + self._extra_s
+        while time.perf_counter() < end:
+            pass
+        return self._model.predict_window(samples, speed)
 
 
 def _latency(seconds: np.ndarray) -> dict | None:
