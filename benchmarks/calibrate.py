@@ -6,10 +6,14 @@ parameters: log f_d, logit ζ, a, b, offset), on
 
 * one recording: the paper whisker plucked, exact model, 10 s at 200 Hz, SNR 30 dB
   (deflection at the Hall sensor), fitted by optimistix Levenberg–Marquardt (jitted),
-  ``scipy.optimize.least_squares(method="lm")`` and lmfit (``leastsq``) from the same
-  data-derived start values: compile time, warm time per fit, and the fitted values;
-* 1000 windows (1 s at 200 Hz, random f_d 20–80 Hz and ζ 0.01–0.06, SNR 30 dB) fitted in one
-  ``vmap``-ed optimistix call (``whiskerid._lsq.batch_least_squares``) against a SciPy loop.
+  ``scipy.optimize.least_squares(method="lm")`` and lmfit (``leastsq``), all on the same five
+  parameters from the same data-derived start values (:func:`whiskerid._calibrate.window_start`)
+  and with the same relative tolerance 1e-8 on parameters and cost: compile time, warm time
+  per fit, steps or function evaluations, and the fitted values;
+* 1000 windows (1 s at 200 Hz, random f_d 20–80 Hz and ζ 0.01–0.06, SNR 30 dB) fitted by
+  :func:`whiskerid.fit_windows`' solver (variable-projection Levenberg–Marquardt, all windows
+  in one compiled ``vmap``-ed loop), by one ``vmap``-ed optimistix call
+  (``whiskerid._lsq.batch_least_squares``) and by a SciPy loop, from the same start values.
 
 Run: ``python benchmarks/calibrate.py [--windows N]`` (prints one JSON object).
 """
@@ -20,7 +24,6 @@ import platform
 import statistics
 import time
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -29,12 +32,13 @@ import whiskerid as wi
 from whiskerid import _lsq
 from whiskerid._calibrate import (
     ZETA_MAX,
-    batched_lm,
-    envelope_zeta,
-    spectral_peaks,
+    _vp_fit,
+    _window_candidates,
     window_model_residuals,
     window_start,
 )
+
+TOL = 1e-8  # relative tolerance on parameters and cost, for all three solvers
 
 
 def _np_residuals(u, t, y):
@@ -78,18 +82,12 @@ def single(repeats: int) -> dict:
     t = sim.t - sim.t[0]
     y = sim.signal()
     y = (y - y.mean()) / y.std()
-    # Start values from the data as calibrate() makes them: spectral peak, envelope decay.
-    fd0 = spectral_peaks(t, y)[0][0]
-    z0 = envelope_zeta(t, y, fd0, fd0) or 0.02
-    wd0 = 2 * np.pi * fd0
-    e = np.exp(-z0 * wd0 * t)
-    basis = np.stack([e * np.cos(wd0 * t), e * np.sin(wd0 * t), np.ones_like(t)], axis=1)
-    lin = np.linalg.lstsq(basis, y, rcond=None)[0]
-    u0 = np.array([np.log(fd0), np.log(z0 / (ZETA_MAX - z0)), *lin])
+    # Start values from the data (spectral peak, log decrement, linear least squares).
+    u0 = window_start(t, y)[0]
     tj, yj = jnp.asarray(t), jnp.asarray(y)
-    solver = _lsq.make_solver()
+    solver = _lsq.make_solver(rtol=TOL, atol=TOL * 1e-2)
 
-    @eqx.filter_jit
+    @jax.jit
     def fit(u):
         r = _lsq.least_squares(window_model_residuals, u, (tj, yj), solver=solver)
         return r.value, r.ok, r.steps
@@ -111,7 +109,7 @@ def single(repeats: int) -> dict:
 
     def scipy_fit():
         return scipy.optimize.least_squares(
-            _np_residuals, u0, args=(t, y), method="lm", xtol=1e-10, ftol=1e-10
+            _np_residuals, u0, args=(t, y), method="lm", xtol=TOL, ftol=TOL
         )
 
     res = scipy_fit()
@@ -130,7 +128,7 @@ def single(repeats: int) -> dict:
         return _np_residuals(np.array([p[f"u{i}"].value for i in range(5)]), t, y)
 
     def lmfit_fit():
-        return lmfit.minimize(lm_resid, params, method="leastsq", xtol=1e-10, ftol=1e-10)
+        return lmfit.minimize(lm_resid, params, method="leastsq", xtol=TOL, ftol=TOL)
 
     r = lmfit_fit()
     out["lmfit_leastsq"] = {
@@ -139,9 +137,11 @@ def single(repeats: int) -> dict:
         "nfev": int(r.nfev),
         **_decode([r.params[f"u{i}"].value for i in range(5)]),
     }
+    out["start"] = _decode(u0)
     w = rec.whisker()
     out["truth"] = {"fd_hz": float(w.damped_frequencies_hz[0]), "zeta": float(w.zeta[0])}
     out["speedup_warm_vs_scipy"] = out["scipy_least_squares_lm"]["warm_s"] / warm
+    out["speedup_warm_vs_lmfit"] = out["lmfit_leastsq"]["warm_s"] / warm
     return out
 
 
@@ -158,61 +158,65 @@ def batch(n: int, n_scipy: int) -> dict:
     y = clean + clean.std(axis=1, keepdims=True) / 10**1.5 * rng.standard_normal((n, m))
     y = (y - y.mean(axis=1, keepdims=True)) / y.std(axis=1, keepdims=True)
     tb = np.broadcast_to(t, (n, m))
+    # The same start information for every solver: the two spectral candidates per window,
+    # and for the five-parameter solvers the better one with its linear coefficients.
+    cands = jnp.asarray(_window_candidates(tb, y))
     u0 = window_start(tb, y)
     args = (jnp.asarray(tb), jnp.asarray(y))
+    out = {"windows": n, "samples_per_window": m}
 
-    def run():
-        solver = _lsq.make_solver(rtol=1e-8, atol=1e-10)  # as fit_windows uses it
+    def run_vp():
+        u, _, _, ok, steps = _vp_fit(cands, *args, max_steps=100)
+        return jax.block_until_ready(u), ok, steps
+
+    t0 = time.perf_counter()
+    run_vp()
+    out["varpro_vmap_compile_plus_first_s"] = time.perf_counter() - t0
+    out["varpro_vmap_warm_s"] = warm_vp = _timeit(run_vp, 5)
+    u_vp, ok_vp, steps = run_vp()
+    out["varpro_steps"] = int(steps)
+    fd_vp = np.exp(np.asarray(u_vp)[:, 0])
+    out["varpro_ok_fraction"] = float(np.mean(ok_vp))
+    out["varpro_median_abs_fd_error_hz"] = float(np.median(np.abs(fd_vp - fd)))
+    out["varpro_abs_fd_error_above_0.1hz"] = int(np.sum(np.abs(fd_vp - fd) > 0.1))
+    # fit_windows end to end: start values (NumPy) + the same solve + unpacking
+    wi.fit_windows(y, rate_hz=200.0)
+    out["fit_windows_warm_s"] = _timeit(lambda: wi.fit_windows(y, rate_hz=200.0), 5)
+
+    def run_optx():
+        solver = _lsq.make_solver(rtol=1e-8, atol=1e-10)
         r = _lsq.batch_least_squares(
             window_model_residuals, jnp.asarray(u0), args, solver=solver, max_steps=100
         )
         return jax.block_until_ready(r.value), r.ok
 
     t0 = time.perf_counter()
-    run()
-    first = time.perf_counter() - t0
-    warm = _timeit(run, 3)
-    val, ok = run()
-    fd_fit = np.exp(np.asarray(val)[:, 0])
-
-    def run_fixed():
-        r = batched_lm(window_model_residuals, jnp.asarray(u0), args, iterations=15)
-        return jax.block_until_ready(r[0]), r[1]
-
-    t0 = time.perf_counter()
-    run_fixed()
-    first_fixed = time.perf_counter() - t0
-    warm_fixed = _timeit(run_fixed, 3)
-    val_f, ok_f = run_fixed()
+    run_optx()
+    out["optimistix_vmap_compile_plus_first_s"] = time.perf_counter() - t0
+    out["optimistix_vmap_warm_s"] = warm_optx = _timeit(run_optx, 1)
+    val, ok = run_optx()
+    out["optimistix_ok_fraction"] = float(np.mean(np.asarray(ok)))
+    out["optimistix_median_abs_fd_error_hz"] = float(
+        np.median(np.abs(np.exp(np.asarray(val)[:, 0]) - fd))
+    )
 
     t0 = time.perf_counter()
     sc = [
         scipy.optimize.least_squares(
-            _np_residuals, u0[i], args=(t, y[i]), method="lm", xtol=1e-10, ftol=1e-10
+            _np_residuals, u0[i], args=(t, y[i]), method="lm", xtol=TOL, ftol=TOL
         )
         for i in range(n_scipy)
     ]
     scipy_s = (time.perf_counter() - t0) * n / n_scipy
     sc_fd = np.exp(np.array([s.x[0] for s in sc]))
-    return {
-        "windows": n,
-        "samples_per_window": m,
-        "optimistix_vmap_compile_plus_first_s": first,
-        "optimistix_vmap_warm_s": warm,
-        "optimistix_ok_fraction": float(np.mean(np.asarray(ok))),
-        "batched_lm_vmap_compile_plus_first_s": first_fixed,
-        "batched_lm_vmap_warm_s": warm_fixed,
-        "batched_lm_ok_fraction": float(np.mean(np.asarray(ok_f))),
-        "batched_lm_median_abs_fd_error_hz": float(
-            np.median(np.abs(np.exp(np.asarray(val_f)[:, 0]) - fd))
-        ),
-        "speedup_batched_lm_vs_scipy_loop": scipy_s / warm_fixed,
-        "scipy_loop_s": scipy_s,
-        "scipy_loop_timed_windows": n_scipy,
-        "speedup_optimistix_vs_scipy_loop": scipy_s / warm,
-        "median_abs_fd_error_hz": float(np.median(np.abs(fd_fit - fd))),
-        "max_fd_diff_vs_scipy_hz": float(np.max(np.abs(fd_fit[:n_scipy] - sc_fd))),
-    }
+    out["scipy_loop_s"] = scipy_s
+    out["scipy_loop_timed_windows"] = n_scipy
+    out["scipy_ok_fraction"] = float(np.mean([s.success for s in sc]))
+    out["scipy_median_abs_fd_error_hz"] = float(np.median(np.abs(sc_fd - fd[:n_scipy])))
+    out["speedup_varpro_vs_scipy_loop"] = scipy_s / warm_vp
+    out["speedup_optimistix_vs_scipy_loop"] = scipy_s / warm_optx
+    out["max_fd_diff_varpro_vs_scipy_hz"] = float(np.max(np.abs(fd_vp[:n_scipy] - sc_fd)))
+    return out
 
 
 def main() -> None:

@@ -117,3 +117,37 @@ def from_interval(x, lo, hi):
     """Inverse of :func:`to_interval`."""
     p = (x - lo) / (hi - lo)
     return jnp.log(p) - jnp.log1p(-p)
+
+
+# Small dense solves written element by element.
+def cholesky_small(a) -> list[list[Any]]:
+    """Cholesky factor ``L`` (``a = L Lᵀ``) of a small symmetric matrix, unrolled.
+
+    ``a`` is a ``k × k`` nested sequence (only the lower triangle is read) whose entries are
+    arrays of one shape, e.g. one value per window of a batch. Every operation is then an
+    element-wise vector operation across the batch: XLA's CPU ``cholesky``/``solve`` under
+    ``vmap`` loops over the batch one small LAPACK call at a time, which costs far more than
+    the arithmetic for 2×2…5×5 systems. A matrix that is not positive definite gives NaN.
+
+    Returns:
+        ``L`` as a nested list (entries above the diagonal are None).
+    """
+    k = len(a)
+    L = [[None] * k for _ in range(k)]
+    for j in range(k):
+        L[j][j] = jnp.sqrt(a[j][j] - sum(L[j][m] ** 2 for m in range(j)))
+        for i in range(j + 1, k):
+            L[i][j] = (a[i][j] - sum(L[i][m] * L[j][m] for m in range(j))) / L[j][j]
+    return L
+
+
+def cho_solve_small(L, b) -> list[Any]:
+    """``(L Lᵀ)⁻¹ b`` for ``L`` from :func:`cholesky_small`; ``b`` is a list of ``k`` arrays."""
+    k = len(b)
+    u = []
+    for i in range(k):
+        u.append((b[i] - sum(L[i][m] * u[m] for m in range(i))) / L[i][i])
+    x = [None] * k
+    for i in reversed(range(k)):
+        x[i] = (u[i] - sum(L[m][i] * x[m] for m in range(i + 1, k))) / L[i][i]
+    return x
