@@ -72,7 +72,9 @@ def find_peaks(
         amps: Amplitudes per bin.
         n: How many peaks to return at most.
         min_separation_hz: Peaks closer than this to a larger one are dropped.
-        min_relative: Peaks below this fraction of the largest are dropped.
+        min_relative: Peaks below this fraction of the largest peak are dropped (the largest
+            local maximum, not the largest bin: a windowed transient or a drift can leave
+            more in the lowest bins than in any peak).
 
     Returns:
         Peaks by decreasing amplitude.
@@ -81,7 +83,7 @@ def find_peaks(
     inner = np.arange(1, amps.size - 1)
     is_max = (amps[inner] > amps[inner - 1]) & (amps[inner] >= amps[inner + 1])
     idx = inner[is_max]
-    idx = idx[amps[idx] >= min_relative * amps.max()] if idx.size else idx
+    idx = idx[amps[idx] >= min_relative * amps[idx].max()] if idx.size else idx
     idx = idx[np.argsort(amps[idx])[::-1]]
     df = freqs[1] - freqs[0]
     peaks: list[Peak] = []
@@ -104,9 +106,21 @@ def _interpolate(amps: np.ndarray, i: int) -> tuple[float, float]:
 
 
 def dominant_peaks(
-    t: np.ndarray, x: np.ndarray, *, n: int = 3, min_separation_hz: float = 2.0
+    t: np.ndarray,
+    x: np.ndarray,
+    *,
+    n: int = 3,
+    min_separation_hz: float = 2.0,
+    min_relative: float = 1e-3,
 ) -> list[Peak]:
-    """Largest spectral peaks of a (possibly non-uniformly) sampled signal."""
+    """Largest spectral peaks of a (possibly non-uniformly) sampled signal.
+
+    Resampled onto a uniform grid at the median rate, Hann-windowed; see :func:`find_peaks`
+    for ``n``, ``min_separation_hz`` and ``min_relative``. A short transient (a pluck) has
+    window ripple a few per cent of its peak: ask for ``min_relative`` above that.
+    """
     _, xu, rate = resample_uniform(t, x)
     freqs, amps = amplitude_spectrum(xu, rate)
-    return find_peaks(freqs, amps, n=n, min_separation_hz=min_separation_hz)
+    return find_peaks(
+        freqs, amps, n=n, min_separation_hz=min_separation_hz, min_relative=min_relative
+    )
