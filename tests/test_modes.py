@@ -1,5 +1,6 @@
 """Cantilever eigenvalues, mode shapes and participation factors against independent math."""
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -93,3 +94,11 @@ def test_high_modes_stay_finite_and_precise():
     phi = wi.mode_shape(beta, jnp.linspace(0, 1, 101))
     assert np.all(np.isfinite(phi))
     np.testing.assert_allclose(np.abs(phi[-1]), 2.0, rtol=1e-8)  # |φ_i(1)| = 2 for μ = 0
+
+
+@pytest.mark.parametrize("mu", [0.0, 0.06, 1.0, 200.0])
+def test_concrete_mu_roots_equal_the_traced_ones(mu):
+    """A concrete μ takes the cached NumPy path; a traced μ the JAX bisection (same steps)."""
+    concrete = np.asarray(wi.cantilever_roots(mu, 6))
+    traced = np.asarray(jax.jit(lambda m: wi.cantilever_roots(m, 6))(mu))
+    np.testing.assert_allclose(concrete, traced, rtol=4e-16, atol=0)

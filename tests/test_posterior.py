@@ -58,6 +58,36 @@ def test_log_prob_matches_direct_computation(prob):
     assert prob.log_prob(z)[0] == pytest.approx(expected, rel=1e-9, abs=1e-6)
 
 
+@pytest.mark.parametrize("span", [10.0, 2e3, 1e6])
+def test_sincos_equals_sin_and_cos(span):
+    """The vectorisable sin/cos (posterior's decay columns) vs NumPy to rounding, grad exact."""
+    import jax
+
+    from whiskerid._trig import sincos
+
+    rng = np.random.default_rng(0)
+    x = np.concatenate([rng.uniform(-span, span, 20000), np.arange(-8, 9) * np.pi / 4, [0.0]])
+    s, c = (np.asarray(v) for v in jax.jit(sincos)(x))
+    np.testing.assert_allclose(s, np.sin(x), rtol=0, atol=4e-16 + 3e-16 * span * 2**-26)
+    np.testing.assert_allclose(c, np.cos(x), rtol=0, atol=4e-16 + 3e-16 * span * 2**-26)
+    ds = jax.vmap(jax.grad(lambda v: sincos(v)[0]))(x[:50])
+    np.testing.assert_allclose(ds, np.cos(x[:50]), rtol=0, atol=4e-16)
+    assert np.all(np.isnan(np.asarray(sincos(np.array([np.nan, np.inf]))[1])))
+
+
+@pytest.mark.parametrize(("modes", "offsets"), [(1, None), (3, None), (2, (0.0, -4e-4, -8e-4))])
+def test_fast_decay_columns_equal_the_calibration_design(modes, offsets):
+    """The posterior's own free-decay design equals ``_calibrate._design`` (to rounding)."""
+    w = wi.paper_record().whisker().with_modes(modes)
+    spec = cal._Spec("decay", "deflection", "none", 2 + 2 * modes, 0.005, 0.0, offsets)
+    t = np.sort(np.random.default_rng(1).uniform(0, 2.0, 700))
+    d = {"t": t, "y": np.zeros_like(t), "scale": 1.0, "hb": 1e-3}
+    D, g = cal._design(None, spec, w, {}, d)
+    cols, g2 = P._columns(None, spec, w, {}, d)
+    np.testing.assert_allclose(np.stack(cols, axis=1), D, rtol=0, atol=1e-14)
+    np.testing.assert_array_equal(g2, g)
+
+
 def test_log_prob_support():
     p = P.setup_posterior(
         wi.paper_record(),

@@ -9,7 +9,10 @@ natural frequencies ``ω_i = β_i² sqrt(EI/(ρa)) / l²`` where ``β_i`` are th
 With ``μ = 0`` these are the paper's constants D = 1.8751, 4.6941, 7.8548, 10.9955, 14.137.
 The roots are found by bisection on brackets that hold for every ``μ ≥ 0`` (each root falls
 from the ``μ = 0`` root towards the ``μ → ∞`` root of ``tan β = tanh β`` as μ grows) and are
-differentiated implicitly, so gradients with respect to ``μ`` are exact.
+differentiated implicitly, so gradients with respect to ``μ`` are exact. A concrete ``μ``
+(not traced: no tip mass, or a tip-mass ratio that is a constant of the computation, as in a
+fit of κ and ζ alone) takes the same bisection and Newton step in NumPy once per value
+(cached), so a jitted model carries the roots as constants instead of an 80-step loop.
 
 Mode shapes use the dimensionless coordinate ``ξ = x / l``:
 
@@ -82,6 +85,35 @@ def _frequency_function(beta, mu):
     )
 
 
+def _frequency_function_np(beta, mu):
+    return (
+        1.0 / np.cosh(beta)
+        + np.cos(beta)
+        + mu * beta * (np.cos(beta) * np.tanh(beta) - np.sin(beta))
+    )
+
+
+@functools.lru_cache(maxsize=256)
+def _roots_np(mu: float, n_modes: int) -> np.ndarray:
+    """:func:`cantilever_roots` at a concrete ``μ``: the same steps in NumPy (read-only)."""
+    lo, hi = _brackets(n_modes)
+    lo, hi = lo + 1e-12, hi.copy()
+    f_lo = _frequency_function_np(lo, mu)
+    for _ in range(_BISECTION_STEPS):
+        mid = 0.5 * (lo + hi)
+        f_mid = _frequency_function_np(mid, mu)
+        same = np.sign(f_mid) == np.sign(f_lo)
+        lo, hi, f_lo = np.where(same, mid, lo), np.where(same, hi, mid), np.where(same, f_mid, f_lo)
+    beta = 0.5 * (lo + hi)
+    # The traced path's final Newton step (a correction at rounding level).
+    c, s, ch, sh = np.cos(beta), np.sin(beta), np.cosh(beta), np.sinh(beta)
+    th = np.tanh(beta)
+    slope = -sh / ch**2 - s + mu * (c * th - s) + mu * beta * (-s * th + c / ch**2 - c)
+    out = beta - _frequency_function_np(beta, mu) / slope
+    out.setflags(write=False)
+    return out
+
+
 def cantilever_roots(mu: Scalar | float, n_modes: int = 5) -> PerMode:
     """Dimensionless eigenvalues ``β_i`` of a cantilever with tip-mass ratio ``μ``.
 
@@ -92,6 +124,11 @@ def cantilever_roots(mu: Scalar | float, n_modes: int = 5) -> PerMode:
     Returns:
         ``β_1 < β_2 < ...`` (shape ``(n_modes,)``); differentiable in ``mu``.
     """
+    if not isinstance(mu, jax.core.Tracer):
+        # Concrete μ: nothing to differentiate, so the roots are constants (cached).
+        mu_np = np.asarray(mu, dtype=float)
+        if mu_np.ndim == 0 and np.isfinite(mu_np) and mu_np >= 0:
+            return jnp.asarray(_roots_np(float(mu_np), int(n_modes)))
     lo_np, hi_np = _brackets(int(n_modes))
     mu = jnp.asarray(mu, dtype=float)
     mu_c = jax.lax.stop_gradient(mu)
