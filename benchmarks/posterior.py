@@ -11,15 +11,42 @@ vmapped call. A third line runs ours as shipped (nuisances marginalised analytic
 Effective samples per second use ζ's integrated autocorrelation time, ESS =
 walkers (steps − 2τ)/τ, for every run alike. Prints one JSON object.
 
+Both run on the same CPUs, one by default (``--cpus 1``; ``--cpus 0``: all the process may
+use). The affinity is set before JAX starts, so XLA's thread pool has that many threads:
+on a small, shared machine, XLA splitting each 16 × 500 loop across threads costs more in
+hand-offs than it gains (measured: 3-5× slower sin/exp loops on 2 busy cores), and lmfit's
+walker-by-walker calls are single-threaded anyway.
+
     .venv/bin/python benchmarks/posterior.py [--walkers 32] [--steps 5000] [--lmfit-steps N]
+        [--cpus 1]
 """
 
+# ruff: noqa: E402  (the CPU affinity must be set before JAX starts)
 import argparse
 import json
 import math
+import os
 import platform
 import sys
 import time
+
+
+def _pin_cpus(argv: list[str]) -> list[int]:
+    """Restrict this process to the first ``--cpus`` allowed CPUs (before JAX starts)."""
+    n = 1
+    for i, a in enumerate(argv):
+        if a == "--cpus" and i + 1 < len(argv):
+            n = int(argv[i + 1])
+        elif a.startswith("--cpus="):
+            n = int(a.split("=", 1)[1])
+    allowed = sorted(os.sched_getaffinity(0))
+    if n > 0:
+        os.sched_setaffinity(0, allowed[:n])
+    return sorted(os.sched_getaffinity(0))
+
+
+if __name__ == "__main__":
+    _CPUS = _pin_cpus(sys.argv[1:])
 
 import emcee
 import jax
@@ -52,9 +79,9 @@ def ess_of(chain_1d: np.ndarray) -> tuple[float, float]:
 
 def run_ours(prob, walkers, steps, zeta_index):
     sampler = P.run_sampler(prob, walkers=walkers, steps=1, seed=0)  # compile
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     sampler = P.run_sampler(prob, walkers=walkers, steps=steps, seed=0)
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     z = sampler.get_chain()[:, :, zeta_index]
     tau, ess = ess_of(0.95 / (1 + np.exp(-z)))
     evals = walkers * (steps + 1)
@@ -62,8 +89,10 @@ def run_ours(prob, walkers, steps, zeta_index):
     return {
         "zeta_median": float(np.median(zeta)),
         "wall_s": round(wall, 2),
+        "cpu_s": round(cpu, 2),
         "steps": steps,
         "log_prob_evals_per_s": round(evals / wall, 1),
+        "log_prob_evals_per_cpu_s": round(evals / cpu, 1),
         "tau_zeta": round(tau, 1),
         "ess_zeta": round(ess, 1),
         "ess_per_s": round(ess / wall, 2),
@@ -100,17 +129,19 @@ def run_lmfit(prob, walkers, steps):
     params.add("__lnsigma", value=float(prob.z0[-1]), min=math.log(1e-6), max=math.log(10.0))
     fcn(params)  # compile
     mini = lmfit.Minimizer(fcn, params)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     res = mini.emcee(
         steps=steps, nwalkers=walkers, burn=0, thin=1, is_weighted=False, seed=0, progress=False
     )
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     names = list(res.var_names)
     tau, ess = ess_of(res.chain[:, :, names.index("zeta")])
     return {
         "wall_s": round(wall, 2),
+        "cpu_s": round(cpu, 2),
         "steps": steps,
         "log_prob_evals_per_s": round(walkers * steps / wall, 1),
+        "log_prob_evals_per_cpu_s": round(walkers * steps / cpu, 1),
         "tau_zeta": round(tau, 1),
         "ess_zeta": round(ess, 1),
         "ess_per_s": round(ess / wall, 2),
@@ -124,6 +155,7 @@ def main(argv=None) -> int:
     ap.add_argument("--walkers", type=int, default=32)
     ap.add_argument("--steps", type=int, default=5000)
     ap.add_argument("--lmfit-steps", type=int, help="fewer steps for lmfit (rates compared)")
+    ap.add_argument("--cpus", type=int, default=1, help="CPUs to run on (0: all allowed)")
     args = ap.parse_args(argv)
     import lmfit
 
@@ -134,6 +166,8 @@ def main(argv=None) -> int:
     out = {
         "problem": f"one-mode decay, {N} samples; {sampled.z0.size} sampled parameters",
         "settings": {"walkers": args.walkers, "steps": args.steps, "seed": 0},
+        "cpus": sorted(os.sched_getaffinity(0)),
+        "load_average": [round(x, 2) for x in os.getloadavg()],
         "versions": {
             "emcee": emcee.__version__,
             "lmfit": lmfit.__version__,
@@ -148,6 +182,9 @@ def main(argv=None) -> int:
     }
     lm, ours = out["lmfit_emcee"], out["whiskerid_same_model"]
     out["speedup_evals_per_s"] = round(ours["log_prob_evals_per_s"] / lm["log_prob_evals_per_s"], 1)
+    out["speedup_evals_per_cpu_s"] = round(
+        ours["log_prob_evals_per_cpu_s"] / lm["log_prob_evals_per_cpu_s"], 1
+    )
     out["speedup_ess_per_s"] = round(ours["ess_per_s"] / max(lm["ess_per_s"], 1e-12), 1)
     out["speedup_ess_per_s_marginalised"] = round(
         out["whiskerid_marginalised"]["ess_per_s"] / max(lm["ess_per_s"], 1e-12), 1
