@@ -8,6 +8,10 @@ and ζ and the fraction of trials whose reported 1σ interval covers the truth (
 for honest uncertainties).
 
     .venv/bin/python examples/calibrate_coverage.py [--trials 200] [--seed0 1000]
+
+A progress bar goes to stderr, the JSON result to stdout. About 2–3 s per trial on a 2-core
+CPU: most of it is ``wi.simulate`` (which compiles its signal function anew for every call);
+a calibration itself takes about 0.5 s once its compiled pieces are warm.
 """
 
 import argparse
@@ -17,6 +21,7 @@ import time
 from dataclasses import replace
 
 import numpy as np
+from tqdm import tqdm
 
 import whiskerid as wi
 
@@ -31,7 +36,7 @@ def trials(n: int, seed0: int = 1000) -> dict:
     )
     rows = []
     t0 = time.perf_counter()
-    for k in range(n):
+    for k in tqdm(range(n), desc="trials", unit="trial", file=sys.stderr):
         sim = wi.simulate(
             rec,
             excitation="decay",

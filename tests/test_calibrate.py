@@ -259,6 +259,19 @@ def test_fit_windows_agrees_with_scipy_and_sees_fast_decays():
         wi.fit_windows(y, rate_hz=rate, solver="newton")
 
 
+def test_closed_form_adc_average_of_free_columns_equals_the_sampled_average():
+    from whiskerid._calibrate import _averaged, _free_columns, _free_columns_averaged
+
+    w = wi.paper_record().whisker().with_modes(3)
+    t = jnp.sort(jnp.asarray(np.random.default_rng(1).uniform(0, 2, 500)))
+    offsets = tuple(float(x) for x in np.asarray(wi.paper_record().adc.averaging_offsets()))
+    sampled = _averaged(lambda tt: _free_columns(w, tt), t, offsets)
+    closed = _free_columns_averaged(w, t, offsets)
+    assert float(jnp.max(jnp.abs(closed - sampled))) < 1e-12
+    # and the average matters: it differs from the unaveraged columns
+    assert float(jnp.max(jnp.abs(closed - _free_columns(w, t)))) > 1e-3
+
+
 def test_bad_observation_is_refused():
     t = np.arange(100) / 200.0
     with pytest.raises(wi.RecordingError, match="non-finite"):
