@@ -28,6 +28,22 @@ def test_mlp_learns_a_separable_toy_problem():
     assert all(np.array_equal(a, b) for a, b in leaves)  # seeded: identical
 
 
+def test_full_batch_and_fixed_epoch_refit():
+    """The default full-batch training learns; ``epochs=`` trains exactly that long on
+    everything (no validation rows) and keeps the final parameters."""
+    rng = np.random.default_rng(4)
+    centres = rng.standard_normal((3, 4)) * 3
+    y = rng.integers(0, 3, 300)
+    x = centres[y] + rng.standard_normal((300, 4))
+    cfg = TrainConfig(max_epochs=400)
+    res = train_mlp(x[:200], y[:200], x[200:], y[200:], 3, cfg)
+    assert res.val_accuracy > 0.9 and res.best_epoch <= res.epochs <= 400
+    refit = train_mlp(x, y, x[:0], y[:0], 3, cfg, epochs=45)
+    assert refit.epochs == 60  # rounded up to whole chunks of 20
+    pred = np.argmax(np.asarray(wi._mlp.predict_proba(refit.model, x)), axis=1)
+    assert np.mean(pred == y) > 0.9
+
+
 def _toy_windows(n_rec=8, per=10):
     """Two classes: a 20 Hz or a 60 Hz tone in noise, one recording per row."""
     rng = np.random.default_rng(1)

@@ -471,9 +471,10 @@ def fit_on_features(
 ) -> ClassifierModel:  # fmt: skip
     """Train on precomputed features of ``ws`` (validation: held-out recordings).
 
-    With ``config.ensemble = K > 1``, K networks are trained, each with its own seed and
-    its own validation recordings (so each sees a different part of the data), and their
-    probabilities are averaged.
+    Early stopping on held-out recordings chooses the number of epochs; with
+    ``config.refit`` (default) the network is then trained again on all of ``ws`` for that
+    many epochs. With ``config.ensemble = K > 1``, K networks are trained, each with its
+    own seed and its own validation recordings, and their probabilities are averaged.
     """
     mean = feats.mean(axis=0)
     std = np.maximum(feats.std(axis=0), 1e-6 * (np.abs(mean) + 1.0))
@@ -482,10 +483,14 @@ def fit_on_features(
     for j in range(max(config.ensemble, 1)):
         cfg = replace(config, seed=config.seed + 1000 * j)
         val = grouped_split(ws, val_fraction, cfg.seed + 1)
-        res = train_mlp(z[~val], ws.labels[~val], z[val], ws.labels[val], len(ws.label_names), cfg)
-        nets.append(res.model)
+        n_cls = len(ws.label_names)
+        res = train_mlp(z[~val], ws.labels[~val], z[val], ws.labels[val], n_cls, cfg)
         runs.append(res)
+        if cfg.refit:  # same padded shape: no new compilation
+            res = train_mlp(z, ws.labels, z[:0], ws.labels[:0], n_cls, cfg, epochs=res.best_epoch)
+        nets.append(res.model)
     info = {"epochs": sum(r.epochs for r in runs), "best_epoch": runs[0].best_epoch,
+            "refit_on_all": config.refit,
             "val_loss": round(float(np.mean([r.best_val_loss for r in runs])), 5),
             "val_accuracy": round(float(np.mean([r.val_accuracy for r in runs])), 4),
             "members": len(nets), "train_windows": int((~val).sum()), "val_windows": int(val.sum()),

@@ -24,7 +24,7 @@ import optax
 from jaxtyping import Array, Float, Int
 
 PAPER_HIDDEN = (256, 128, 64, 32, 16)
-DEFAULT_HIDDEN = (64, 32)
+DEFAULT_HIDDEN = (16,)
 
 
 class MLP(eqx.Module):
@@ -122,20 +122,25 @@ class TrainConfig:
         balance: Weight the loss by inverse class frequency (unbalanced datasets).
         ensemble: Networks trained (different seeds and validation recordings) whose
             probabilities a model averages.
+        refit: After early stopping has chosen the number of epochs on validation
+            recordings, train again on *all* training windows for that many epochs (the
+            validation recordings are data too: holding out a fifth of the recordings cost
+            3-4 points of accuracy on new recordings).
     """
 
     hidden: tuple[int, ...] = DEFAULT_HIDDEN
-    learning_rate: float = 1e-2
-    weight_decay: float = 1e-2
+    learning_rate: float = 3e-3
+    weight_decay: float = 1.0
     batch_size: int = 0
-    max_epochs: int = 600
-    patience: int = 60
+    max_epochs: int = 1500
+    patience: int = 150
     chunk: int = 20
     seed: int = 0
     input_noise: float = 0.3
     label_smoothing: float = 0.0
     balance: bool = False
     ensemble: int = 1
+    refit: bool = True
 
 
 #: The paper pipeline's settings: its five-layer network, minibatches of 128, no extra
@@ -147,9 +152,11 @@ PAPER_CONFIG = TrainConfig(hidden=PAPER_HIDDEN, learning_rate=2e-3, weight_decay
 
 def default_config(features: str = "fitted") -> TrainConfig:
     """Training settings for a feature pipeline: :data:`PAPER_CONFIG` for ``paper``; for
-    ``fitted`` one small network with weight decay and input noise, full batch (chosen on
-    validation recordings inside the training data: wider and deeper networks memorised
-    recordings; an ensemble of three gained little and cost three times the time)."""
+    ``fitted`` one narrow hidden layer (16) with strong weight decay and input noise, full
+    batch, refitted on all data. Chosen on a separately seeded synthetic dataset, split by
+    recording: the features separate the terrains almost linearly, and wider or deeper
+    networks (64-32, 128-64) learnt the recordings instead (3-4 points worse on new ones);
+    an ensemble of three gained little for three times the training time."""
     return PAPER_CONFIG if features == "paper" else TrainConfig()
 
 
@@ -245,10 +252,15 @@ def train_mlp(
     y_val: Int[Array, " m"],
     n_classes: int,
     config: TrainConfig = TrainConfig(),
+    *,
+    epochs: int | None = None,
 ) -> TrainResult:
     """Train an :class:`MLP` on standardised features with early stopping on ``(x_val, y_val)``.
 
-    Deterministic for a given ``config.seed`` (and inputs).
+    With ``epochs`` given, trains for that many epochs (rounded up to whole chunks) and
+    keeps the final parameters instead: the refit on all data once early stopping has
+    chosen the length (``x_val`` may then be empty). Deterministic for a given
+    ``config.seed`` (and inputs).
     """
     x = np.asarray(x, np.float32)
     xv = np.asarray(x_val, np.float32)
@@ -281,8 +293,11 @@ def train_mlp(
     best = (params, jnp.asarray(jnp.inf, jnp.float32))
     batch = rows if config.batch_size <= 0 else min(config.batch_size, rows)
     history: list[float] = []
-    best_epoch, epochs = 0, 0
-    while epochs < config.max_epochs:
+    best_epoch = 0
+    fixed = epochs is not None
+    stop = max(int(epochs), 1) if fixed else config.max_epochs
+    epochs = 0
+    while epochs < stop:
         key, sub = jax.random.split(key)
         (params, opt_state, best), vals, better = _run_chunk(
             params,
@@ -302,9 +317,11 @@ def train_mlp(
         if better.any():
             best_epoch = epochs + int(np.flatnonzero(better)[-1]) + 1
         epochs += config.chunk
-        if epochs - best_epoch >= config.patience:
+        if not fixed and epochs - best_epoch >= config.patience:
             break
-    model = eqx.combine(best[0], static)
+    if fixed:
+        best_epoch = epochs
+    model = eqx.combine(params if fixed else best[0], static)
     pred = np.argmax(np.asarray(predict_proba(model, xv)), axis=1)
     acc = float(np.mean(pred == yv)) if m else 0.0
     return TrainResult(model, epochs, best_epoch, float(best[1]), acc, history)
