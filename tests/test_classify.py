@@ -134,3 +134,18 @@ def test_cli_synth_train_evaluate_classify(tmp_path, capsys):
     (model / "model.json").write_text("{}")
     assert main(["classify", str(model), str(rec)]) == 2
     assert "incompatible model format" in capsys.readouterr().err
+
+
+def test_multichannel_model_round_trip(tmp_path):
+    """Windows of two signals: the tone is in the second one only."""
+    ws = _toy_windows()
+    noise = np.random.default_rng(6).standard_normal(ws.windows.shape)
+    ws2 = replace(ws, windows=np.stack([noise, ws.windows], axis=1))
+    model = wi.train_classifier(ws2, config=FAST)
+    assert model.spec.channels == 2 and model.spec.n_features == 2 * wi.FeatureSpec().n_features
+    assert wi.evaluate_classifier(model, ws2)["accuracy"] > 0.9
+    loaded = wi.ClassifierModel.load(model.save(tmp_path / "m2"))
+    label, _ = loaded.predict_window(ws2.windows[0])
+    assert label == model.labels[int(np.argmax(model.predict_proba(ws2.windows[:1])[0]))]
+    with pytest.raises(ValueError, match=r"\(2, 200\)"):
+        loaded.predict_window(ws2.windows[0, 1])

@@ -81,3 +81,19 @@ def test_envelope_periodicity_finds_impacts_and_slope_follows_the_psd():
     red = np.fft.irfft(np.fft.rfft(white) / np.maximum(np.arange(201), 1), 400)[:, :200]
     slope = np.asarray(wi.compute_features(spec, red))[:, 6 + spec.n_bands + 2 + 3]
     assert -2.6 < float(np.median(slope)) < -1.4
+
+
+@pytest.mark.parametrize("kind", ["fitted", "paper"])
+def test_multichannel_windows_concatenate_per_channel_features(kind):
+    spec1 = wi.FeatureSpec(kind=kind, rate_hz=100.0, window=100)
+    spec3 = wi.FeatureSpec(kind=kind, rate_hz=100.0, window=100, channels=3)
+    x = np.random.default_rng(5).standard_normal((4, 3, 100))
+    x[:, 1] *= 7.0  # channels differ in scale, e.g. gyro and accelerometer
+    f3 = np.asarray(wi.compute_features(spec3, x))
+    assert f3.shape == (4, 3 * spec1.n_features) == (4, spec3.n_features)
+    for c in range(3):
+        fc = np.asarray(wi.compute_features(spec1, x[:, c]))
+        np.testing.assert_allclose(f3[:, c * spec1.n_features : (c + 1) * spec1.n_features], fc,
+                                   atol=1e-9)  # fmt: skip
+    with pytest.raises(ValueError, match=r"\(n, 3, 100\)"):
+        wi.compute_features(spec3, x[:, 0])

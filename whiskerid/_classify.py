@@ -48,7 +48,8 @@ class WindowSet:
     """Labelled windows cut from recordings.
 
     Attributes:
-        windows: Uniformly sampled windows, shape ``(n, window)``.
+        windows: Uniformly sampled windows, shape ``(n, window)``, or ``(n, channels,
+            window)`` for several signals per window (e.g. six IMU axes).
         labels: Class index per window, shape ``(n,)``.
         label_names: Class names, indexed by ``labels``.
         recording: Index into ``sources`` per window, shape ``(n,)``.
@@ -294,8 +295,9 @@ class ClassifierModel:
     def predict_proba(self, windows, speeds=None) -> np.ndarray:
         """Class probabilities, shape ``(n, classes)``, for windows ``(n, window)``."""
         windows = jnp.asarray(windows, dtype=float)
-        if windows.ndim != 2 or windows.shape[1] != self.window:
-            raise ValueError(f"windows must have shape (n, {self.window}), got {windows.shape}")
+        if windows.shape[1:] != self.spec.window_shape:
+            shape = ", ".join(map(str, ("n", *self.spec.window_shape)))
+            raise ValueError(f"windows must have shape ({shape}), got {windows.shape}")
         p = self._proba(self.nets, self.mean, self.std, windows, self._speeds(len(windows), speeds))
         return np.asarray(p)
 
@@ -312,8 +314,11 @@ class ClassifierModel:
         well under a millisecond per call afterwards.
         """
         x = np.asarray(samples, dtype=np.float64)
-        if x.shape != (self.window,):
-            raise ValueError(f"a window has {self.window} samples, got shape {x.shape}")
+        if x.shape != self.spec.window_shape:
+            raise ValueError(
+                f"a window has {self.window} samples (shape {self.spec.window_shape}), "
+                f"got shape {x.shape}"
+            )
         if speed is None and self.needs_speed:
             raise ValueError("this model needs the robot speed (m/s) of each window")
         v = np.float64(np.nan if speed is None else speed)
@@ -323,6 +328,8 @@ class ClassifierModel:
 
     def classify_recording(self, rec: Recording, *, speed: float | None = None) -> dict:
         """Labels of every window of a recording, and one for the whole (mean probability)."""
+        if self.spec.channels != 1:
+            raise ValueError("classify_recording reads one channel; this model takes several")
         x = recording_signal(rec, self.channel if self.channel in rec.columns else None)
         w = cut_windows(rec.t, x, rate_hz=self.rate_hz, window=self.window, hop=self.hop)
         if len(w) == 0:
@@ -443,13 +450,16 @@ def default_spec(
     The spatial-frequency range is the one every training speed covers: bins from
     ``2 Δf`` at the slowest speed to Nyquist at the fastest.
     """
-    window = ws.windows.shape[1]
+    window = ws.windows.shape[-1]
+    channels = ws.windows.shape[1] if ws.windows.ndim == 3 else 1
     if features == "paper":
-        return FeatureSpec(kind="paper", rate_hz=ws.rate_hz, window=window)
+        return FeatureSpec(kind="paper", rate_hz=ws.rate_hz, window=window, channels=channels)
     use = ws.has_speed if use_speed is None else use_speed
     if use and not ws.has_speed:
         raise ValueError("speed features need speed_mps on every recording")
-    spec = FeatureSpec(kind="fitted", rate_hz=ws.rate_hz, window=window, use_speed=use)
+    spec = FeatureSpec(
+        kind="fitted", rate_hz=ws.rate_hz, window=window, use_speed=use, channels=channels
+    )
     if use:
         df, nyq = ws.rate_hz / window, ws.rate_hz / 2
         lo, hi = 2 * df / float(ws.speeds.min()), nyq / float(ws.speeds.max())
@@ -495,7 +505,7 @@ def fit_on_features(
             "val_accuracy": round(float(np.mean([r.val_accuracy for r in runs])), 4),
             "members": len(nets), "train_windows": int((~val).sum()), "val_windows": int(val.sum()),
             "seed": config.seed, "hidden": list(config.hidden)}  # fmt: skip
-    return ClassifierModel(spec, ws.label_names, mean, std, nets, hop=ws.windows.shape[1],
+    return ClassifierModel(spec, ws.label_names, mean, std, nets, hop=ws.windows.shape[-1],
                            info=info)  # fmt: skip
 
 

@@ -61,6 +61,8 @@ class FeatureSpec:
         n_spatial_bands: Log-spaced spatial-frequency bands (fitted, with speed).
         spatial_lo: Lowest spatial frequency (cycles/m).
         spatial_hi: Highest spatial frequency (cycles/m).
+        channels: Signals per window (e.g. six IMU axes); each channel gets the same
+            features and the vectors are concatenated, channel by channel.
     """
 
     kind: FeatureKind = "fitted"
@@ -73,6 +75,7 @@ class FeatureSpec:
     n_spatial_bands: int = 10
     spatial_lo: float = 10.0
     spatial_hi: float = 330.0
+    channels: int = 1
 
     def __post_init__(self):
         if self.kind not in FEATURE_KINDS:
@@ -85,10 +88,20 @@ class FeatureSpec:
             raise ValueError(f"rate_hz must be positive, not {self.rate_hz!r}")
         if not 0 < self.spatial_lo < self.spatial_hi:
             raise ValueError("need 0 < spatial_lo < spatial_hi")
+        if self.channels < 1:
+            raise ValueError(f"channels must be at least 1, not {self.channels}")
 
     @property
     def n_features(self) -> int:
-        """Length of the feature vector."""
+        """Length of the feature vector (all channels)."""
+        return self.channels * self._per_channel()
+
+    @property
+    def window_shape(self) -> tuple[int, ...]:
+        """Shape of one window: ``(window,)``, or ``(channels, window)``."""
+        return (self.window,) if self.channels == 1 else (self.channels, self.window)
+
+    def _per_channel(self) -> int:
         if self.kind == "paper":
             return self.window
         n = 6 + self.n_bands + 2 + 6 + 2 + self.n_bands // 2 + 6 + 3 * self.n_peaks + 2
@@ -345,8 +358,14 @@ def fitted_features(
     return jnp.concatenate(parts)
 
 
-def window_features(spec: FeatureSpec, x: Float[Array, " window"], speed_mps=jnp.nan):
-    """Feature vector of one window for either pipeline."""
+def window_features(spec: FeatureSpec, x, speed_mps=jnp.nan):
+    """Feature vector of one window for either pipeline.
+
+    ``x`` has shape ``spec.window_shape``: ``(window,)``, or ``(channels, window)`` whose
+    channels are featurised alike and concatenated.
+    """
+    if x.ndim == 2:
+        return jax.vmap(lambda c: window_features(spec, c, speed_mps))(x).reshape(-1)
     if spec.kind == "paper":
         return paper_features(x)
     return fitted_features(spec, x, speed_mps)
@@ -368,12 +387,14 @@ def compute_features(spec: FeatureSpec, windows, speeds=None) -> jax.Array:
 
     Args:
         spec: The feature settings.
-        windows: Uniformly sampled windows at ``spec.rate_hz``, shape ``(n, spec.window)``.
+        windows: Uniformly sampled windows at ``spec.rate_hz``, shape
+            ``(n, *spec.window_shape)``.
         speeds: Robot speed per window (m/s); needed when ``spec.use_speed``.
     """
     windows = jnp.asarray(windows, dtype=float)
-    if windows.ndim != 2 or windows.shape[1] != spec.window:
-        raise ValueError(f"windows must have shape (n, {spec.window}), got {windows.shape}")
+    if windows.shape[1:] != spec.window_shape:
+        shape = ", ".join(map(str, ("n", *spec.window_shape)))
+        raise ValueError(f"windows must have shape ({shape}), got {windows.shape}")
     if speeds is None:
         if spec.use_speed and spec.kind == "fitted":
             raise ValueError("these features need the robot speed (speed_mps) of each window")
