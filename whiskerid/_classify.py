@@ -489,7 +489,7 @@ def fit_on_features(
     mean = feats.mean(axis=0)
     std = np.maximum(feats.std(axis=0), 1e-6 * (np.abs(mean) + 1.0))
     z = (feats - mean) / std
-    nets, runs = [], []
+    nets, runs, refit_epochs = [], [], 0
     for j in range(max(config.ensemble, 1)):
         cfg = replace(config, seed=config.seed + 1000 * j)
         val = grouped_split(ws, val_fraction, cfg.seed + 1)
@@ -498,12 +498,14 @@ def fit_on_features(
         runs.append(res)
         if cfg.refit:  # same padded shape: no new compilation
             res = train_mlp(z, ws.labels, z[:0], ws.labels[:0], n_cls, cfg, epochs=res.best_epoch)
+            refit_epochs += res.epochs
         nets.append(res.model)
     info = {"epochs": sum(r.epochs for r in runs), "best_epoch": runs[0].best_epoch,
-            "refit_on_all": config.refit,
+            "refit_on_all": config.refit, "refit_epochs": refit_epochs,
             "val_loss": round(float(np.mean([r.best_val_loss for r in runs])), 5),
             "val_accuracy": round(float(np.mean([r.val_accuracy for r in runs])), 4),
-            "members": len(nets), "train_windows": int((~val).sum()), "val_windows": int(val.sum()),
+            "members": len(nets), "train_windows": len(ws) if config.refit else int((~val).sum()),
+            "val_windows": int(val.sum()),
             "seed": config.seed, "hidden": list(config.hidden)}  # fmt: skip
     return ClassifierModel(spec, ws.label_names, mean, std, nets, hop=ws.windows.shape[-1],
                            info=info)  # fmt: skip

@@ -55,9 +55,11 @@ def add_classify_commands(sub, command_error) -> None:
             "Train an MLP terrain classifier on DATASET (ROOT/<label>/<recording>.csv). "
             "Recordings are resampled to the rate in their metadata or timestamps and cut "
             "into windows. --features paper: standardise + |FFT| and the paper's 7-layer "
-            "network; fitted: spectral peaks with sub-bin interpolation, band energies, a "
-            "per-window resonance fit, time-domain shape, and speed-normalised forms when "
-            "every recording has speed_mps. Early stopping on held-out recordings."
+            "network; fitted: spectral peaks with sub-bin interpolation, band energies and "
+            "spectral shape, a closed-form resonance estimate, time-domain and envelope "
+            "statistics, and speed-normalised forms when every recording has speed_mps, "
+            "with one small network. Early stopping on held-out recordings chooses the "
+            "number of epochs; the network is then refitted on all windows."
         ),
         formatter_class=_FMT,
     )
@@ -72,8 +74,10 @@ def add_classify_commands(sub, command_error) -> None:
     )
     t.add_argument("--no-speed", action="store_true", help="do not use speed_mps metadata")
     t.add_argument("--hidden", type=int, nargs="+", help="hidden layer sizes")
-    t.add_argument("--max-epochs", type=int, default=300)
-    t.add_argument("--ensemble", type=int, help="networks averaged (3 for fitted, 1 for paper)")
+    t.add_argument(
+        "--max-epochs", type=int, help="epoch limit (1500 for fitted, 300 for paper by default)"
+    )
+    t.add_argument("--ensemble", type=int, help="networks averaged (1 by default)")
     t.add_argument("--balance", action="store_true", help="weight classes by inverse frequency")
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
@@ -127,7 +131,11 @@ def _cmd_train(args) -> dict:
         raise CommandError("--window must be positive")
     ws = load_dataset(args.dataset, channel=args.channel, window_s=args.window,
                       hop_s=args.hop, rate_hz=args.rate)  # fmt: skip
-    config = replace(default_config(args.features), seed=args.seed, max_epochs=args.max_epochs)
+    config = replace(default_config(args.features), seed=args.seed)
+    if args.max_epochs is not None:
+        if args.max_epochs < 1:
+            raise CommandError("--max-epochs must be at least 1")
+        config = replace(config, max_epochs=args.max_epochs)
     if args.hidden:
         config = replace(config, hidden=tuple(args.hidden))
     if args.ensemble is not None:
@@ -142,7 +150,7 @@ def _cmd_train(args) -> dict:
                              channel=args.channel, hop=hop)  # fmt: skip
     model.save(args.out)
     info = model.info
-    _say(f"trained on {len(ws)} windows of {ws.windows.shape[1]} samples at {ws.rate_hz:g} Hz, "
+    _say(f"trained on {len(ws)} windows of {ws.windows.shape[-1]} samples at {ws.rate_hz:g} Hz, "
          f"{len(ws.label_names)} classes; validation accuracy {info['val_accuracy']:.3f}; "
          f"wrote {args.out}")  # fmt: skip
     return {"out": str(args.out), "features": args.features, "labels": list(model.labels),
