@@ -237,3 +237,29 @@ def test_coverage_small():
         hits90 += lo90 < ZETA < hi90
     assert 0.4 <= hits68 / n <= 0.95
     assert 0.7 <= hits90 / n <= 1.0
+
+
+def test_static_test_pins_ei():
+    """A static test (tip force vs deflection) in the log-probability pins EI: the posterior
+    of EI covers the truth and its width is the static fit's own uncertainty."""
+    rec = wi.paper_record()
+    l, ei = rec.structure.length_m, float(rec.whisker().EI)
+    rng = np.random.default_rng(7)
+    force = np.linspace(0.0, 2e-3, 12)  # N
+    compliance = l**3 / (3 * ei)  # tip deflection per tip force
+    noise = 0.01 * compliance * force.max()  # 1 % of the largest deflection
+    defl = 1e-5 + compliance * force + noise * rng.standard_normal(force.size)
+    static = cal.StaticTest(force, defl)
+    post = P.sample_posterior(rec, decay(0), static=static, n_modes=1, walkers=32, steps=1000)
+    q = post.params["EI"]
+    # Expected 1σ of EI from least squares of δ on F (σ estimated from the residuals, as the
+    # calibration does): σ_EI/EI = σ_slope/slope.
+    A = np.stack([np.ones_like(force), force], axis=1)
+    coef, rss, *_ = np.linalg.lstsq(A, defl, rcond=None)
+    s2 = rss[0] / (force.size - 2)
+    sd_slope = math.sqrt(s2 / np.sum((force - force.mean()) ** 2))
+    sd_ei = ei * sd_slope / coef[1]
+    assert q["q2.5"] < ei < q["q97.5"], (q, ei)
+    assert abs(q["median"] - ei) < 3 * sd_ei
+    assert 0.7 < q["std"] / sd_ei < 1.4, (q["std"], sd_ei)
+    assert "log_EI" in post.chain_names

@@ -144,16 +144,6 @@ class _Model:
         return self.n_theta + self.n_rec
 
 
-def _free_columns(w, t):
-    """``_calibrate._free_columns`` with :func:`whiskerid._trig.sincos` for XLA's sin and cos
-    (equal to rounding; those two were most of the cost of a log-probability evaluation)."""
-    omega, zeta = w.omega_rad_s, w.zeta
-    wd = omega * jnp.sqrt(1.0 - zeta**2)
-    e = jnp.exp(-zeta * omega * t[:, None])
-    s, c = sincos(wd * t[:, None])
-    return jnp.concatenate([e * c, e * s], axis=1)
-
-
 def _columns(problem, spec, w, rec, d):
     """The calibration's design of one recording as a list of columns, and its fixed part.
 
@@ -169,17 +159,27 @@ def _columns(problem, spec, w, rec, d):
         return [D[:, i] for i in range(D.shape[1])], g
     t = d["t"]
     span = jnp.maximum(t[-1] - t[0], 1e-12)
-    cols = [jnp.ones_like(t), (t - 0.5 * (t[0] + t[-1])) / span]
-    if spec.avg_offsets is None:
-        omega, zeta = w.omega_rad_s, w.zeta
-        wd = omega * jnp.sqrt(1.0 - zeta**2)
-        e = [jnp.exp(-zeta[i] * omega[i] * t) for i in range(w.n_modes)]
-        sc = [sincos(wd[i] * t) for i in range(w.n_modes)]
-        cols += [e[i] * sc[i][1] for i in range(w.n_modes)]
-        cols += [e[i] * sc[i][0] for i in range(w.n_modes)]
-    else:
-        free = _cal._averaged(lambda tt: _free_columns(w, tt), t, spec.avg_offsets)
-        cols += [free[:, i] for i in range(free.shape[1])]
+    omega, zeta = w.omega_rad_s, w.zeta
+    wd = omega * jnp.sqrt(1.0 - zeta**2)
+    cos_cols, sin_cols = [], []
+    for i in range(w.n_modes):  # e^{-ζω t} cos(ω_d t) and e^{-ζω t} sin(ω_d t)
+        e = jnp.exp(-zeta[i] * omega[i] * t)
+        s, c = sincos(wd[i] * t)
+        cos_cols.append(e * c)
+        sin_cols.append(e * s)
+    if spec.avg_offsets is not None:
+        # ADC conversion average in closed form, as _calibrate._free_columns_averaged:
+        # the mean of e^{λ(t + o_k)} over the offsets is e^{λt} · mean_k e^{λ o_k}.
+        off = jnp.asarray(spec.avg_offsets)[:, None]
+        e = jnp.exp(-zeta * omega * off)
+        a_re = jnp.mean(e * jnp.cos(wd * off), axis=0)
+        a_im = jnp.mean(e * jnp.sin(wd * off), axis=0)
+        m = range(w.n_modes)
+        cos_cols, sin_cols = (
+            [cos_cols[i] * a_re[i] - sin_cols[i] * a_im[i] for i in m],
+            [sin_cols[i] * a_re[i] + cos_cols[i] * a_im[i] for i in m],
+        )
+    cols = [jnp.ones_like(t), (t - 0.5 * (t[0] + t[-1])) / span, *cos_cols, *sin_cols]
     return cols, jnp.zeros_like(t)
 
 
