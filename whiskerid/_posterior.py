@@ -49,6 +49,7 @@ import numpy as np
 
 from . import _calibrate as _cal
 from ._calibrate import ZETA_MAX, Observation, sha256_of
+from ._modes import cantilever_roots
 from ._record import WhiskerRecord
 from ._trig import sincos
 
@@ -144,6 +145,22 @@ class _Model:
         return self.n_theta + self.n_rec
 
 
+def _omega(problem, w):
+    """``w.omega_rad_s``, with the eigenvalues as constants when μ is fixed.
+
+    Inside the jitted log-probability μ = M_t/(ρa l) is a traced value even when it is a
+    constant of the problem, and the root finder's loop would run in every call. Unless a
+    static test frees ρa (``fit_ei``), μ is computed here from the problem's numbers, so
+    :func:`whiskerid.cantilever_roots` returns its cached roots (equal to the traced ones to
+    rounding; tests/test_modes.py).
+    """
+    if problem is None or problem.fit_ei:
+        return w.omega_rad_s
+    mu = problem.tip_mass_kg / (problem.rho_a * problem.length_m)
+    beta = cantilever_roots(mu, w.n_modes)
+    return beta**2 * jnp.sqrt(w.kappa) / w.length_m**2
+
+
 def _columns(problem, spec, w, rec, d):
     """The calibration's design of one recording as a list of columns, and its fixed part.
 
@@ -159,7 +176,7 @@ def _columns(problem, spec, w, rec, d):
         return [D[:, i] for i in range(D.shape[1])], g
     t = d["t"]
     span = jnp.maximum(t[-1] - t[0], 1e-12)
-    omega, zeta = w.omega_rad_s, w.zeta
+    omega, zeta = _omega(problem, w), w.zeta
     wd = omega * jnp.sqrt(1.0 - zeta**2)
     cos_cols, sin_cols = [], []
     for i in range(w.n_modes):  # e^{-ζω t} cos(ω_d t) and e^{-ζω t} sin(ω_d t)
@@ -254,7 +271,7 @@ def _log_prior(model, theta, w, log_sigma, args):
             jac = jnp.log(z) + jnp.log(ZETA_MAX - z) - math.log(ZETA_MAX)
             lp = lp + jnp.sum(prior_logpdf(dist, z, a, b) + jac)
         elif name == "f1_hz":  # f_1 ∝ √κ: d f_1 / d log κ = f_1 / 2
-            f1 = w.natural_frequencies_hz[0]
+            f1 = _omega(model.problem, w)[0] / (2 * jnp.pi)
             lp = lp + prior_logpdf(dist, f1, a, b) + jnp.log(f1 / 2)
         elif name == "kappa":
             kappa = jnp.exp(theta["log_kappa"])
