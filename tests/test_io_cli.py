@@ -145,3 +145,10 @@ def test_demo_runs_end_to_end(tmp_path, capsys):
         assert row["paper"]["peaks_hz"][0] == row["fb_hz"] == row["exact"]["peaks_hz"][0]
     for name in ("modal_analysis_paper.png", "modal_analysis_exact.png", "pluck_adc.png"):
         assert (tmp_path / name).stat().st_size > 10_000
+    post = summary["posterior"]  # stage 5: emcee on the calibrated pluck (true zeta 0.04)
+    z = post["zeta"]
+    assert z["q2.5"] < z["q16"] < z["median"] < z["q84"] < z["q97.5"]
+    assert abs(z["median"] - 0.04) < 0.002 and z["q84"] - z["q16"] < 0.002
+    assert post["converged"] and post["steps"] >= post["steps_needed"] and z["tau"] > 1
+    for name in ("posterior_corner.png", "posterior_trace.png", "posterior-whisker.toml"):
+        assert (tmp_path / name).stat().st_size > 1_000

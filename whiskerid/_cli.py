@@ -177,7 +177,10 @@ def _add_demo(sub) -> None:
             "equivalent-beam values and natural frequencies, reproduce the paper's modal "
             "analysis (Eq. 1 and the exact modal model at h_b = 0.1/0.3 mm, f_b = 100/300 Hz) "
             "with dominant spectral peaks, and simulate what the Pi would record (ADS1115 at "
-            "200 Hz) for a sine excitation and a pluck. Writes CSVs and PNG plots to --out."
+            "200 Hz) for a sine excitation and a pluck; calibrate that pluck, sample its "
+            "damping posterior with emcee, train and test a terrain classifier, and run the "
+            "Pi's online loop on an emulated ADS1115. Writes CSVs, TOML records and PNG plots "
+            "to --out."
         ),
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )

@@ -1,14 +1,16 @@
 """``whiskerid demo``: the main job end to end on embedded defaults.
 
-Stages (a posterior stage is left out: compiling it would double the demo's time):
+Stages:
 
 1. the paper's whisker: equivalent-beam values and natural frequencies;
 2. the paper's modal analysis (Eq. 1 and the exact modal model) at h_b = 0.1/0.3 mm and
    f_b = 100/300 Hz, 1 s at 20 kHz, with dominant spectral peaks;
 3. what the Pi records (Hall sensor + ADS1115 at 200 Hz) for a 30 Hz sine and a pluck;
 4. calibration of a simulated pluck from a record 30 % off;
-5. terrain classification: a small simulated dataset, trained and tested by recording;
-6. the Pi's online loop on an emulated ADS1115: sample, classify every 0.5 s, record.
+5. the posterior of ζ (and f_1) of that pluck with emcee: median, 68 % interval, τ,
+   convergence, corner and trace plots;
+6. terrain classification: a small simulated dataset, trained and tested by recording;
+7. the Pi's online loop on an emulated ADS1115: sample, classify every 0.5 s, record.
 """
 
 from pathlib import Path
@@ -105,7 +107,8 @@ def run_demo(out: Path, *, plots: bool = True, say=print) -> dict:
             png = plot_modal_analysis(out / f"modal_analysis_{name}.png", rows)
             summary[f"modal_analysis_{name}_png"] = str(png)
         say(f"      plots: {out}/modal_analysis_paper.png, modal_analysis_exact.png, *_adc.png")
-    summary["calibration"] = _calibration_stage(out, record, plots=plots, say=say)
+    summary["calibration"], calibrated = _calibration_stage(out, record, plots=plots, say=say)
+    summary["posterior"] = _posterior_stage(out, *calibrated, plots=plots, say=say)
     summary["classification"] = _classification_stage(out, plots=plots, say=say)
     summary["stream"] = _stream_stage(out, Path(summary["classification"]["model"]), say=say)
     return summary
@@ -134,7 +137,8 @@ def _calibration_stage(out: Path, record, *, plots: bool, say) -> dict:
     nominal = record.replace(
         structure=replace(coil, shear_modulus_pa=coil.shear_modulus_pa * 1.69), zeta=0.052
     )
-    cal = calibrate(nominal, Observation(sim.t, sim.signal(), observable="adc", gain=None))
+    obs = Observation(sim.t, sim.signal(), observable="adc", gain=None, name="pluck")
+    cal = calibrate(nominal, obs)
     path = cal.record.save(out / "calibrated-whisker.toml")
     p = cal.params
     truth = record.whisker()
@@ -153,6 +157,41 @@ def _calibration_stage(out: Path, record, *, plots: bool, say) -> dict:
         from ._calibrate_plot import plot_calibration
 
         summary["png"] = str(plot_calibration(out / "calibration.png", cal))
+    return summary, (cal.record, obs)
+
+
+def _posterior_stage(out: Path, record, obs, *, plots: bool, say) -> dict:
+    """emcee posterior of the calibrated pluck's ζ and f_1 (a short, converged run)."""
+    from ._posterior import sample_posterior
+
+    say("[5] posterior of zeta with emcee: the calibrated pluck, 32 walkers x 2000 steps")
+    # 2000 steps: tau is about 35 steps here, and 50 tau is the convergence criterion.
+    post = sample_posterior(record, obs, walkers=32, steps=2000, seed=0)
+    z, f = post.params["zeta"], post.params["f1_hz"]
+    d = post.diagnostics
+    say(
+        f"      zeta = {z['median']:.4f} (68 %: {z['q16']:.4f} to {z['q84']:.4f}; true 0.04), "
+        f"f1 = {f['median']:.3f} Hz (68 %: {f['q16']:.3f} to {f['q84']:.3f}); "
+        f"max tau = {d['max_tau']:.1f} steps, acceptance {d['acceptance']:.2f}"
+    )
+    say(f"      {d['message']}")
+    path = post.record.save(out / "posterior-whisker.toml")
+    summary = {
+        "zeta": {k: z[k] for k in ("median", "q16", "q84", "q2.5", "q97.5", "tau", "ess")},
+        "f1_hz": {k: f[k] for k in ("median", "q16", "q84")},
+        "max_tau": d["max_tau"],
+        "acceptance": d["acceptance"],
+        "converged": d["converged"],
+        "steps": d["steps"],
+        "steps_needed": d["steps_needed"],
+        "record": str(path),
+    }
+    if plots:
+        from ._posterior_plot import plot_corner, plot_trace
+
+        summary["corner_png"] = str(plot_corner(out / "posterior_corner.png", post))
+        summary["trace_png"] = str(plot_trace(out / "posterior_trace.png", post))
+        say(f"      wrote {path}, {out}/posterior_corner.png, posterior_trace.png")
     return summary
 
 
@@ -162,7 +201,7 @@ def _stream_stage(out: Path, model_dir: Path, *, say, terrain: str = "brick") ->
     from ._classify import ClassifierModel
     from ._stream import OnlineClassifier, open_recorder, run_stream, terrain_source
 
-    say(f"[6] online stream: emulated ADS1115 fed by the simulator on {terrain} at 0.2 m/s, 10 s")
+    say(f"[7] online stream: emulated ADS1115 fed by the simulator on {terrain} at 0.2 m/s, 10 s")
     clock = hw.FakeClock()
     timing = {"clock": clock.now_ns, "sleep": clock.sleep}
     source = terrain_source(paper_record(), terrain, 0.2, 12.0, seed=5)
@@ -195,7 +234,7 @@ def _classification_stage(out: Path, *, plots: bool, say) -> dict:
     )
     from ._terrain import synthesize_dataset
 
-    say("[5] terrain classification: 7 simulated terrains at 0.2 m/s, 6 runs x 6 s each")
+    say("[6] terrain classification: 7 simulated terrains at 0.2 m/s, 6 runs x 6 s each")
     synthesize_dataset(out / "terrain", speeds=(0.2,), runs=6, duration_s=6.0, seed=0)
     train, test = split_by_recording(load_dataset(out / "terrain"), 0.34, seed=0)
     model = train_classifier(train)
