@@ -8,8 +8,9 @@ parameters: log f_d, logit ζ, a, b, offset), on
   (deflection at the Hall sensor), fitted by optimistix Levenberg–Marquardt (jitted),
   ``scipy.optimize.least_squares(method="lm")`` and lmfit (``leastsq``), all on the same five
   parameters from the same data-derived start values (:func:`whiskerid._calibrate.window_start`)
-  and with the same relative tolerance 1e-8 on parameters and cost: compile time, warm time
-  per fit, steps or function evaluations, and the fitted values;
+  and with the same relative tolerance 1e-8 on parameters and cost (and again at 1e-10,
+  calibrate()'s default): compile time, warm time per fit, steps or function evaluations, and
+  the fitted values;
 * 1000 windows (1 s at 200 Hz, random f_d 20–80 Hz and ζ 0.01–0.06, SNR 30 dB) fitted by
   :func:`whiskerid.fit_windows`' solver (variable-projection Levenberg–Marquardt, all windows
   in one compiled ``vmap``-ed loop), by one ``vmap``-ed optimistix call
@@ -136,6 +137,33 @@ def single(repeats: int) -> dict:
         "ok": bool(r.success),
         "nfev": int(r.nfev),
         **_decode([r.params[f"u{i}"].value for i in range(5)]),
+    }
+    # The same three-way comparison at calibrate()'s tighter default tolerance
+    # (optimistix rtol 1e-10, atol 1e-12; SciPy xtol = ftol = 1e-10).
+    tight = _lsq.make_solver()
+
+    @jax.jit
+    def fit_tight(u):
+        r = _lsq.least_squares(window_model_residuals, u, (tj, yj), solver=tight)
+        return r.value, r.steps
+
+    val_t, steps_t = jax.block_until_ready(fit_tight(jnp.asarray(u0)))
+
+    def scipy_tight():
+        return scipy.optimize.least_squares(
+            _np_residuals, u0, args=(t, y), method="lm", xtol=1e-10, ftol=1e-10
+        )
+
+    res_t = scipy_tight()
+    out["tolerance_1e-10"] = {
+        "optimistix_warm_s": _timeit(
+            lambda: jax.block_until_ready(fit_tight(jnp.asarray(u0))), repeats
+        ),
+        "optimistix_steps": int(steps_t),
+        "optimistix_fd_hz": _decode(val_t)["fd_hz"],
+        "scipy_warm_s": _timeit(scipy_tight, repeats),
+        "scipy_nfev": int(res_t.nfev),
+        "scipy_fd_hz": _decode(res_t.x)["fd_hz"],
     }
     out["start"] = _decode(u0)
     w = rec.whisker()
