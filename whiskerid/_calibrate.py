@@ -1296,7 +1296,7 @@ def fit_windows(
     (:func:`window_start`). The default solver is Levenberg–Marquardt by variable
     projection: the amplitude terms and offset are solved exactly at every step, so only
     ``log f_d`` and ``logit ζ`` are iterated, all windows together in one compiled loop
-    (:func:`_vp_fit`; for 1000 windows of 200 samples the solve is 40–60× faster than a
+    (:func:`_vp_fit`; for 1000 windows of 200 samples the solve is 25–60× faster than a
     SciPy loop from the same starts, the whole call 15–35×: ``benchmarks/calibrate.py``).
     A window of NaNs or garbage gets ``ok = False`` and leaves the others untouched.
 
