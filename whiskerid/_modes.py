@@ -76,20 +76,13 @@ def _brackets(n_modes: int) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-def _frequency_function(beta, mu):
-    """The frequency equation divided by cosh β (same roots, no overflow)."""
+def _frequency_function(beta, mu, xp=jnp):
+    """The frequency equation divided by cosh β (same roots, no overflow); ``xp`` is
+    ``jax.numpy`` or ``numpy``."""
     return (
-        1.0 / jnp.cosh(beta)
-        + jnp.cos(beta)
-        + mu * beta * (jnp.cos(beta) * jnp.tanh(beta) - jnp.sin(beta))
-    )
-
-
-def _frequency_function_np(beta, mu):
-    return (
-        1.0 / np.cosh(beta)
-        + np.cos(beta)
-        + mu * beta * (np.cos(beta) * np.tanh(beta) - np.sin(beta))
+        1.0 / xp.cosh(beta)
+        + xp.cos(beta)
+        + mu * beta * (xp.cos(beta) * xp.tanh(beta) - xp.sin(beta))
     )
 
 
@@ -98,10 +91,10 @@ def _roots_np(mu: float, n_modes: int) -> np.ndarray:
     """:func:`cantilever_roots` at a concrete ``μ``: the same steps in NumPy (read-only)."""
     lo, hi = _brackets(n_modes)
     lo, hi = lo + 1e-12, hi.copy()
-    f_lo = _frequency_function_np(lo, mu)
+    f_lo = _frequency_function(lo, mu, np)
     for _ in range(_BISECTION_STEPS):
         mid = 0.5 * (lo + hi)
-        f_mid = _frequency_function_np(mid, mu)
+        f_mid = _frequency_function(mid, mu, np)
         same = np.sign(f_mid) == np.sign(f_lo)
         lo, hi, f_lo = np.where(same, mid, lo), np.where(same, hi, mid), np.where(same, f_mid, f_lo)
     beta = 0.5 * (lo + hi)
@@ -109,7 +102,7 @@ def _roots_np(mu: float, n_modes: int) -> np.ndarray:
     c, s, ch, sh = np.cos(beta), np.sin(beta), np.cosh(beta), np.sinh(beta)
     th = np.tanh(beta)
     slope = -sh / ch**2 - s + mu * (c * th - s) + mu * beta * (-s * th + c / ch**2 - c)
-    out = beta - _frequency_function_np(beta, mu) / slope
+    out = beta - _frequency_function(beta, mu, np) / slope
     out.setflags(write=False)
     return out
 
