@@ -139,6 +139,11 @@ def main(argv: list[str] | None = None) -> int:
     n = 0
     warmup = min(capacity, round(args.rate))  # memory baseline after the first second too
     rss_warm = blocks_warm = None
+    # RSS every 10 s of samples: growth that stops after the start-up is not a leak; growth
+    # over the second half of the run is.
+    trace_every = round(10 * args.rate)
+    rss_trace = np.zeros(capacity // trace_every + 2)
+    n_trace = 0
 
     gc.collect()
     rss_start, blocks_start = rss_kib(), sys.getallocatedblocks()
@@ -154,6 +159,9 @@ def main(argv: list[str] | None = None) -> int:
                 on_label(online.classify(w))
         if n == warmup and rss_warm is None:
             rss_warm, blocks_warm = rss_kib(), sys.getallocatedblocks()
+        if n % trace_every == 0 and n_trace < rss_trace.size:
+            rss_trace[n_trace] = rss_kib()
+            n_trace += 1
     if worker is not None:
         worker.close()
     wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
@@ -210,6 +218,10 @@ def main(argv: list[str] | None = None) -> int:
             "rss_end": rss_end,
             "growth": rss_end - rss_start,
             "growth_after_first_second": None if rss_warm is None else rss_end - rss_warm,
+            "growth_over_second_half": (
+                float(rss_trace[n_trace - 1] - rss_trace[n_trace // 2]) if n_trace >= 4 else None
+            ),
+            "every_10s": rss_trace[:n_trace].tolist(),
         },
         "python_heap_blocks_growth_after_first_second": (
             None if blocks_warm is None else blocks_end - blocks_warm

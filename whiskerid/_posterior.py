@@ -48,6 +48,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import _calibrate as _cal
+from . import _lsq
 from ._calibrate import ZETA_MAX, Observation, sha256_of
 from ._modes import cantilever_roots
 from ._record import WhiskerRecord
@@ -206,19 +207,17 @@ def _rec_loglik(model, spec, rec, d, w, log_sigma, nu):
     n, k = y.shape[0], len(cols)
     sigma = jnp.exp(log_sigma)
     if model.marginal:
-        # Normal equations with Jacobi scaling (k is small); the residual is formed
-        # explicitly (no cancellation in yᵀy − bᵀG⁻¹b).
-        gram = [[None] * k for _ in range(k)]
-        for i in range(k):
-            for j in range(i + 1):
-                gram[i][j] = gram[j][i] = jnp.sum(cols[i] * cols[j])
-        gram = jnp.stack([jnp.stack(row) for row in gram])
-        s = jnp.sqrt(jnp.diag(gram))
-        b = jnp.stack([jnp.sum(c * y) for c in cols])
-        diag, coef = _chol_solve_small(gram / jnp.outer(s, s), b / s)
-        coef = coef / s
-        resid = y - sum(coef[i] * cols[i] for i in range(k))
-        logdet = 2 * jnp.sum(jnp.log(diag)) + 2 * jnp.sum(jnp.log(s))
+        # Normal equations with Jacobi scaling, solved element by element (k is small; see
+        # _lsq.cholesky_small); the residual is formed explicitly (no cancellation in
+        # yᵀy − bᵀG⁻¹b).
+        gram = [[jnp.sum(cols[i] * cols[j]) for j in range(i + 1)] for i in range(k)]
+        s = [jnp.sqrt(gram[i][i]) for i in range(k)]
+        L = _lsq.cholesky_small(
+            [[gram[i][j] / (s[i] * s[j]) for j in range(i + 1)] for i in range(k)]
+        )
+        coef = _lsq.cho_solve_small(L, [jnp.sum(cols[i] * y) / s[i] for i in range(k)])
+        resid = y - sum(coef[i] / s[i] * cols[i] for i in range(k))
+        logdet = 2 * sum(jnp.log(L[i][i]) + jnp.log(s[i]) for i in range(k))
         return (
             -(n - k) * log_sigma
             - 0.5 * logdet
@@ -235,29 +234,6 @@ def _rec_loglik(model, spec, rec, d, w, log_sigma, nu):
         - 0.5 * jnp.log(nu * jnp.pi)
     )
     return n * (const - log_sigma) - 0.5 * (nu + 1) * jnp.sum(jnp.log1p(z**2 / nu))
-
-
-def _chol_solve_small(a, b):
-    """Cholesky ``a = L Lᵀ`` and ``a⁻¹ b`` unrolled for a small static size.
-
-    Element by element, so that under ``vmap`` every operation is a vector operation across
-    walkers (XLA's batched LAPACK calls loop over the batch on the CPU and were the larger
-    part of the cost). Returns ``(diag L, a⁻¹ b)``.
-    """
-    k = a.shape[0]
-    L = [[None] * k for _ in range(k)]
-    for j in range(k):
-        d = a[j, j] - sum(L[j][m] ** 2 for m in range(j))
-        L[j][j] = jnp.sqrt(d)
-        for i in range(j + 1, k):
-            L[i][j] = (a[i, j] - sum(L[i][m] * L[j][m] for m in range(j))) / L[j][j]
-    u = []
-    for i in range(k):
-        u.append((b[i] - sum(L[i][m] * u[m] for m in range(i))) / L[i][i])
-    x = [None] * k
-    for i in reversed(range(k)):
-        x[i] = (u[i] - sum(L[m][i] * x[m] for m in range(i + 1, k))) / L[i][i]
-    return jnp.stack([L[i][i] for i in range(k)]), jnp.stack(x)
 
 
 def _log_prior(model, theta, w, log_sigma, args):
