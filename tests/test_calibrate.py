@@ -23,6 +23,14 @@ def _off_by_30_percent(rec: wi.WhiskerRecord) -> wi.WhiskerRecord:
     )
 
 
+def _pluck(record, observable, *, gain_known=False, **simulate_kwargs) -> wi.Observation:
+    """A free decay of ``record`` simulated by :func:`whiskerid.simulate`, as calibrate gets it:
+    same observable, sensor gain unknown (``gain=None``) unless ``gain_known``."""
+    sim = wi.simulate(record, excitation="decay", observable=observable, **simulate_kwargs)
+    gain = {} if gain_known else {"gain": None}
+    return wi.Observation(sim.t, sim.signal(), excitation="decay", observable=observable, **gain)
+
+
 @pytest.fixture(scope="module")
 def paper():
     rec = wi.paper_record()
@@ -33,17 +41,8 @@ def paper():
 @pytest.fixture(scope="module")
 def decay_fit(paper):
     rec, _, _ = paper
-    sim = wi.simulate(
-        rec,
-        excitation="decay",
-        observable="adc",
-        rate_hz=200,
-        duration_s=10,
-        noise_db=30,
-        seed=11,
-        tip_deflection_m=2e-3,
-    )
-    obs = wi.Observation(sim.t, sim.signal(), excitation="decay", observable="adc", gain=None)
+    obs = _pluck(rec, "adc", rate_hz=200, duration_s=10, noise_db=30, seed=11,
+                 tip_deflection_m=2e-3)  # fmt: skip
     return wi.calibrate(_off_by_30_percent(rec), obs)
 
 
@@ -77,16 +76,8 @@ def test_vibrations_alone_never_report_both_EI_and_C(decay_fit):
 
 def test_material_pin_reports_C_not_EI(paper):
     rec, _, _ = paper
-    sim = wi.simulate(
-        rec,
-        excitation="decay",
-        observable="deflection",
-        rate_hz=400,
-        duration_s=2,
-        noise_db=40,
-        seed=2,
-    )
-    obs = wi.Observation(sim.t, sim.signal(), excitation="decay", observable="deflection")
+    obs = _pluck(rec, "deflection", gain_known=True, rate_hz=400, duration_s=2, noise_db=40,
+                 seed=2)  # fmt: skip
     cal = wi.calibrate(rec, obs, pin="material", n_modes=1)
     assert "C" in cal.params and "EI" not in cal.params and "EI" in cal.fixed
     assert cal.params["C"]["value"] == pytest.approx(6.207, rel=2e-3)
@@ -99,17 +90,8 @@ def test_static_test_pins_EI_so_C_follows(paper):
     force = np.linspace(0.0, 0.05, 8)
     defl = force * 0.06**3 / (3 * ei) + 2e-7 * rng.standard_normal(8)
     static = wi.StaticTest(force, defl)
-    sim = wi.simulate(
-        rec,
-        excitation="decay",
-        observable="voltage",
-        rate_hz=200,
-        duration_s=4,
-        noise_db=35,
-        seed=5,
-        tip_deflection_m=2e-3,
-    )
-    obs = wi.Observation(sim.t, sim.signal(), excitation="decay", observable="voltage", gain=None)
+    obs = _pluck(rec, "voltage", rate_hz=200, duration_s=4, noise_db=35, seed=5,
+                 tip_deflection_m=2e-3)  # fmt: skip
     cal = wi.calibrate(_off_by_30_percent(rec), obs, static=static, n_modes=1)
     p = cal.params
     assert cal.ok and "EI" in p and "C" in p and "static" in p["C"]["source"]
@@ -120,19 +102,9 @@ def test_static_test_pins_EI_so_C_follows(paper):
 
 def test_nonuniform_timestamps(paper):
     rec, f1, zeta = paper
-    sim = wi.simulate(
-        rec,
-        excitation="decay",
-        observable="adc",
-        rate_hz=200,
-        duration_s=5,
-        noise_db=30,
-        seed=7,
-        jitter_s=1e-3,
-        tip_deflection_m=2e-3,
-    )
-    assert np.std(np.diff(sim.t)) > 3e-4
-    obs = wi.Observation(sim.t, sim.signal(), excitation="decay", observable="adc", gain=None)
+    obs = _pluck(rec, "adc", rate_hz=200, duration_s=5, noise_db=30, seed=7, jitter_s=1e-3,
+                 tip_deflection_m=2e-3)  # fmt: skip
+    assert np.std(np.diff(obs.t)) > 3e-4
     cal = wi.calibrate(_off_by_30_percent(rec), obs)
     assert cal.params["f1_hz"]["value"] == pytest.approx(f1, rel=1e-3)
     assert cal.params["zeta"]["value"] == pytest.approx(zeta, rel=0.05)
@@ -327,17 +299,8 @@ def test_reported_sigma_covers_the_truth_about_68_percent(paper):
     start = _off_by_30_percent(rec)
     hits_f, hits_z = [], []
     for seed in range(30):
-        sim = wi.simulate(
-            rec,
-            excitation="decay",
-            observable="adc",
-            rate_hz=200,
-            duration_s=10,
-            noise_db=30,
-            seed=500 + seed,
-            tip_deflection_m=2e-3,
-        )
-        obs = wi.Observation(sim.t, sim.signal(), observable="adc", gain=None)
+        obs = _pluck(rec, "adc", rate_hz=200, duration_s=10, noise_db=30, seed=500 + seed,
+                     tip_deflection_m=2e-3)  # fmt: skip
         p = wi.calibrate(start, obs).params
         assert abs(p["f1_hz"]["value"] / f1 - 1) < 1e-3
         hits_f.append(abs(p["f1_hz"]["value"] - f1) <= p["f1_hz"]["std"])
