@@ -263,11 +263,11 @@ class _Slower:
     def __getattr__(self, name):
         return getattr(self._model, name)
 
-    def predict_window(self, samples, speed=None):
+    def window_proba(self, samples, speed=None):
         end = time.perf_counter() + self._extra_s
         while time.perf_counter() < end:
             pass
-        return self._model.predict_window(samples, speed)
+        return self._model.window_proba(samples, speed)
 
 
 def _latency(seconds: np.ndarray) -> dict | None:

@@ -106,6 +106,85 @@ def test_train_save_load_round_trip_and_refusals(tmp_path):
         wi.ClassifierModel.load(path)
 
 
+def _fused_by_loop(proba, recording, start_s, lookback_s):
+    """fuse_context written out window by window (the reference)."""
+    out = np.empty_like(proba)
+    for i in range(len(proba)):
+        near = ((recording == recording[i]) & (start_s <= start_s[i])
+                & (start_s >= start_s[i] - lookback_s - 1e-9))  # fmt: skip
+        m = np.mean(np.log(proba[near]), axis=0)
+        out[i] = np.exp(m) / np.exp(m).sum()
+    return out
+
+
+def test_fuse_context_uses_the_past_of_the_same_recording_only():
+    rng = np.random.default_rng(3)
+    n = 40
+    proba = rng.dirichlet(np.ones(4), n)
+    recording = rng.integers(0, 3, n)  # interleaved recordings
+    start_s = rng.permutation(n) * 0.5  # out of order, hop 0.5 s
+    for lookback in (0.0, 0.5, 2.0, 100.0):
+        got = wi.fuse_context(proba, recording, start_s, lookback_s=lookback)
+        np.testing.assert_allclose(got, _fused_by_loop(proba, recording, start_s, lookback),
+                                   rtol=1e-12)  # fmt: skip
+    np.testing.assert_array_equal(wi.fuse_context(proba, recording, start_s, lookback_s=0), proba)
+    # A window's label never depends on a later window or on another recording.
+    later = proba.copy()
+    last = np.argmax(np.where(recording == 0, start_s, -1))
+    later[last] = [0.97, 0.01, 0.01, 0.01]
+    later[recording == 1] = [0.01, 0.01, 0.01, 0.97]
+    a = wi.fuse_context(proba, recording, start_s, lookback_s=2.0)
+    b = wi.fuse_context(later, recording, start_s, lookback_s=2.0)
+    same = (recording == 2) | ((recording == 0) & (np.arange(n) != last))
+    np.testing.assert_allclose(a[same], b[same], rtol=1e-12)
+    with pytest.raises(ValueError, match="lookback_s"):
+        wi.fuse_context(proba, recording, start_s, lookback_s=-1)
+
+
+def test_context_lifts_ambiguous_windows_and_round_trips(tmp_path):
+    """Windows that are each barely informative (a weak tone in noise): fusing three per
+    label beats one per label, on recordings the model has not seen; the context is saved
+    in the model file, and a file without it (older) labels every window on its own."""
+    rng = np.random.default_rng(5)
+    t = np.arange(200) / 200.0
+
+    def windows(n_rec, per, seed):
+        g = np.random.default_rng(seed)
+        w, y, r = [], [], []
+        for k in range(n_rec):
+            f = 20.0 if k % 2 == 0 else 60.0
+            for _ in range(per):
+                w.append(0.25 * np.sin(2 * np.pi * f * t + g.uniform(0, 6)) + g.standard_normal(200))
+                y.append(k % 2)
+                r.append(k)
+        return wi.WindowSet(np.array(w), np.array(y), ("low", "high"), np.array(r),
+                            np.full(len(y), np.nan), [f"r{i}" for i in range(n_rec)], 200.0)  # fmt: skip
+
+    train, test = windows(8, 30, 6), windows(6, 30, int(rng.integers(100, 200)))
+    model = wi.train_classifier(train, config=FAST)
+    assert model.context_s == pytest.approx(3.0)  # three 1 s windows by default (fitted)
+    res = wi.evaluate_classifier(model, test)
+    assert res["context_s"] == pytest.approx(3.0)
+    assert res["accuracy"] > res["accuracy_per_window"] + 0.05, res
+    assert 0.55 < res["accuracy_per_window"] < 0.95  # the windows really are ambiguous
+
+    path = model.save(tmp_path / "m")
+    head = json.loads((path / "model.json").read_text())
+    assert head["context_s"] == pytest.approx(3.0)
+    loaded = wi.ClassifierModel.load(path)
+    assert loaded.context_s == pytest.approx(3.0) and loaded.lookback_s == pytest.approx(2.0)
+    del head["context_s"]
+    (path / "model.json").write_text(json.dumps(head))
+    old = wi.ClassifierModel.load(path)
+    assert old.lookback_s == 0.0
+    assert wi.evaluate_classifier(old, test)["accuracy"] == pytest.approx(
+        res["accuracy_per_window"], abs=1e-9
+    )
+    (path / "model.json").write_text(json.dumps({**head, "context_s": 0.5}))
+    with pytest.raises(wi.ModelError, match="shorter than one window"):
+        wi.ClassifierModel.load(path)
+
+
 def test_confusion_matrix_and_text():
     c = confusion_matrix([0, 0, 1, 1, 1], [0, 1, 1, 1, 0], 2)
     assert c.tolist() == [[1, 1], [1, 2]]

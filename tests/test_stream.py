@@ -20,14 +20,14 @@ from whiskerid._stream import BackgroundClassifier, OnlineClassifier, run_stream
 class ThresholdModel:
     """A stand-in model: 'loud' when the window's std exceeds 1, else 'quiet'."""
 
-    window, rate_hz, channel = 200, 200.0, "adc"
+    window, rate_hz, channel, labels, lookback_s = 200, 200.0, "adc", ("loud", "quiet"), 0.0
 
     def __init__(self):
         self.seen = []
 
-    def predict_window(self, samples, speed=None):
+    def window_proba(self, samples, speed=None):
         self.seen.append(np.asarray(samples))
-        return ("loud", 0.9) if np.std(samples) > 1 else ("quiet", 0.8)
+        return np.array([0.9, 0.1]) if np.std(samples) > 1 else np.array([0.2, 0.8])
 
 
 def _samples(t, x):
@@ -45,6 +45,29 @@ def test_windows_every_hop_with_the_right_samples():
     assert [w.label for w in labels] == ["quiet", "quiet", "loud", "loud"]
     assert all(len(w) == 200 for w in model.seen)
     assert all(w.latency_s >= 0 for w in labels)
+
+
+def test_labels_fuse_the_models_context_by_time():
+    """With ``lookback_s = 1`` and a 0.5 s hop, a label fuses the windows that ended in
+    the last second (three): one loud window among quiet ones is reported as quiet, with
+    its own label kept in ``window_label``; a lasting change wins after two windows."""
+    model = ThresholdModel()
+    model.lookback_s = 1.0
+    online = OnlineClassifier(model, hop_s=0.5)
+    t = np.arange(0, 6.0, 1 / 200)
+    loud = ((t > 2.05) & (t < 2.45)) | (t > 4.0)  # a 0.4 s burst, then loud for good
+    x = np.where(loud, 10 * np.sin(2 * np.pi * 20 * t), 0.0)
+    got = [w for s in _samples(t, x) if (w := online.push(s.t_s, s.code)) is not None]
+    ends = np.round([w.t_end_s for w in got], 1).tolist()
+    own = [e for e, w in zip(ends, got, strict=True) if w.window_label == "loud"]
+    fused = [e for e, w in zip(ends, got, strict=True) if w.label == "loud"]
+    # Windows end at 1.0, 1.5, ..., 5.5 s; on their own, those holding the burst (2.5,
+    # 3.0 s) and those reaching past 4 s (4.5 s on) are loud.
+    assert own == [2.5, 3.0, 4.5, 5.0, 5.5]
+    # Fused over three (log-odds 2.20 loud, -1.39 quiet): one loud window of three stays
+    # quiet (2.5, 4.5 s), two of three are loud (3.0, 3.5, 5.0 s).
+    assert fused == [3.0, 3.5, 5.0, 5.5]
+    assert all(0.5 < w.confidence <= 1.0 for w in got)
 
 
 def test_gaps_are_interpolated_not_shifted():
@@ -94,10 +117,10 @@ class SlowModel(ThresholdModel):
         self.release = threading.Event()
         self.threads = set()
 
-    def predict_window(self, samples, speed=None):
+    def window_proba(self, samples, speed=None):
         self.threads.add(threading.current_thread().name)
         assert self.release.wait(10)
-        return super().predict_window(samples, speed)
+        return super().window_proba(samples, speed)
 
 
 def test_background_labels_equal_inline_labels_in_order():
@@ -143,7 +166,7 @@ def test_a_slow_model_never_holds_up_the_sampling_loop():
 
 def test_a_failing_model_is_reported_not_swallowed(tmp_path):
     class Broken(ThresholdModel):
-        def predict_window(self, samples, speed=None):
+        def window_proba(self, samples, speed=None):
             raise FloatingPointError("weights are NaN")
 
     recorder = hw.Recorder(tmp_path / "r.csv", columns=("adc",), rate_hz=200, units="code")

@@ -17,8 +17,9 @@ Public API, re-exported from private modules (SI units throughout):
   Student-t, HDF5 resume, τ-based convergence), :func:`setup_posterior`, :class:`Posterior`;
 * terrain classification: :func:`synthesize_dataset` (simulated terrains),
   :func:`compute_features` / :class:`FeatureSpec`, :func:`load_dataset`,
-  :func:`train_classifier`, :func:`evaluate_classifier`, :func:`paper_protocol`, and
-  :class:`ClassifierModel` (``predict_window`` for online use);
+  :func:`train_classifier`, :func:`evaluate_classifier`, :func:`paper_protocol`,
+  :func:`fuse_context` (labels from a window and the windows before it), and
+  :class:`ClassifierModel` (``predict_window`` / ``window_proba`` for online use);
 * signals and files: :func:`dominant_peaks`, :class:`Recording`, :func:`read_recording`,
   :func:`write_csv`.
 
@@ -45,6 +46,7 @@ from ._classify import ClassifierModel as ClassifierModel
 from ._classify import ModelError as ModelError
 from ._classify import WindowSet as WindowSet
 from ._classify import evaluate_classifier as evaluate_classifier
+from ._classify import fuse_context as fuse_context
 from ._classify import load_dataset as load_dataset
 from ._classify import paper_protocol as paper_protocol
 from ._classify import split_by_recording as split_by_recording

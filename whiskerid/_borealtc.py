@@ -54,7 +54,7 @@ def load_borealtc(
     )
     window = round(window_s * rate_hz)
     hop = window if hop_s is None else max(round(hop_s * rate_hz), 1)
-    wins, labels, recs, sources = [], [], [], []
+    wins, labels, recs, sources, starts = [], [], [], [], []
     for k, terrain in enumerate(terrains):
         files = sorted((root / terrain).glob("imu_*.csv"))[:max_runs]
         for f in files:
@@ -78,6 +78,7 @@ def load_borealtc(
             labels.append(np.full(len(w), k))
             recs.append(np.full(len(w), len(sources)))
             sources.append(str(f))
+            starts.append(np.arange(len(w)) * hop / rate_hz)
     n = sum(len(w) for w in wins)
     return WindowSet(
         np.concatenate(wins),
@@ -87,4 +88,5 @@ def load_borealtc(
         np.full(n, np.nan),
         sources,
         rate_hz,
+        np.concatenate(starts),
     )

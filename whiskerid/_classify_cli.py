@@ -10,6 +10,12 @@ from ._features import FEATURE_KINDS
 _FMT = argparse.ArgumentDefaultsHelpFormatter
 
 
+_CONTEXT_HELP = (
+    "signal each label rests on (s): the window and the windows before it, fused (mean "
+    "log-probability; the label lags a change of terrain by up to S minus one window)"
+)
+
+
 def _say(*parts) -> None:
     print(*parts, file=sys.stderr)
 
@@ -79,6 +85,10 @@ def add_classify_commands(sub, command_error) -> None:
     )
     t.add_argument("--ensemble", type=int, help="networks averaged (1 by default)")
     t.add_argument("--balance", action="store_true", help="weight classes by inverse frequency")
+    t.add_argument(
+        "--context", type=float, metavar="S",
+        help=_CONTEXT_HELP + "; 3 windows for fitted, 1 for paper by default",
+    )  # fmt: skip
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     t.set_defaults(func=_cmd_train)
@@ -92,6 +102,8 @@ def add_classify_commands(sub, command_error) -> None:
     e.add_argument("model", type=Path)
     e.add_argument("dataset", type=Path)
     e.add_argument("--plot", type=Path, help="save the confusion matrix as this PNG")
+    e.add_argument("--context", type=float, metavar="S",
+                   help=_CONTEXT_HELP + "; the model's by default")  # fmt: skip
     e.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     e.set_defaults(func=_cmd_evaluate)
 
@@ -104,6 +116,8 @@ def add_classify_commands(sub, command_error) -> None:
     c.add_argument("model", type=Path)
     c.add_argument("recording", type=Path)
     c.add_argument("--speed", type=float, help="robot speed (m/s); from the metadata by default")
+    c.add_argument("--context", type=float, metavar="S",
+                   help=_CONTEXT_HELP + "; the model's by default")  # fmt: skip
     c.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     c.set_defaults(func=_cmd_classify)
 
@@ -145,9 +159,10 @@ def _cmd_train(args) -> dict:
     if args.balance:
         config = replace(config, balance=True)
     hop = None if args.hop is None else round(args.hop * ws.rate_hz)
+    _check_context(args.context, args.window)
     model = train_classifier(ws, features=args.features, config=config,
                              use_speed=False if args.no_speed else None,
-                             channel=args.channel, hop=hop)  # fmt: skip
+                             channel=args.channel, hop=hop, context_s=args.context)  # fmt: skip
     model.save(args.out)
     info = model.info
     _say(f"trained on {len(ws)} windows of {ws.windows.shape[-1]} samples at {ws.rate_hz:g} Hz, "
@@ -155,26 +170,40 @@ def _cmd_train(args) -> dict:
          f"wrote {args.out}")  # fmt: skip
     return {"out": str(args.out), "features": args.features, "labels": list(model.labels),
             "rate_hz": ws.rate_hz, "window": model.window, "windows": len(ws),
-            "use_speed": model.needs_speed, **info}  # fmt: skip
+            "use_speed": model.needs_speed, "context_s": model.context_s, **info}  # fmt: skip
 
 
-def _load_model(path):
+def _check_context(context_s, window_s):
+    if context_s is not None and not context_s >= window_s - 1e-9:
+        raise CommandError(
+            f"--context {context_s:g} s is shorter than one window ({window_s:g} s); "
+            "pass at least the window length (one window: no fusion)"
+        )
+
+
+def _load_model(path, context_s=None):
     from ._classify import ClassifierModel
 
-    return ClassifierModel.load(path)
+    model = ClassifierModel.load(path)
+    if context_s is not None:
+        _check_context(context_s, model.window_s)
+        model.context_s = float(context_s)
+    return model
 
 
 def _cmd_evaluate(args) -> dict:
     from ._classify import evaluate, format_confusion, load_dataset, plot_confusion
 
-    model = _load_model(args.model)
+    model = _load_model(args.model, args.context)
     ws = load_dataset(args.dataset, channel=model.channel, window_s=model.window / model.rate_hz,
                       rate_hz=model.rate_hz, labels=model.labels)  # fmt: skip
     if model.needs_speed and not ws.has_speed:
         raise CommandError(f"{args.model} needs speed_mps on every recording of {args.dataset}")
     res = evaluate(model, ws)
     _say(format_confusion(res["confusion"], res["labels"]))
-    _say(f"accuracy {res['accuracy']:.4f} on {res['n_windows']} windows")
+    _say(f"accuracy {res['accuracy']:.4f} on {res['n_windows']} windows, labels resting on "
+         f"{model.context_s:g} s (each window on its own: "
+         f"{res['accuracy_per_window']:.4f})")  # fmt: skip
     if args.plot:
         plot_confusion(args.plot, res["confusion"], res["labels"])
         res["plot"] = str(args.plot)
@@ -185,7 +214,7 @@ def _cmd_evaluate(args) -> dict:
 def _cmd_classify(args) -> dict:
     from ._io import read_recording
 
-    model = _load_model(args.model)
+    model = _load_model(args.model, args.context)
     rec = read_recording(args.recording)
     res = model.classify_recording(rec, speed=args.speed)
     _say(f"{args.recording}: {res['label']} (confidence {res['confidence']:.3f}, "

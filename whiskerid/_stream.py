@@ -14,6 +14,7 @@ schedule, so a slow model (a Pi is several times slower than a desktop) costs la
 not samples.
 """
 
+import collections
 import queue
 import signal
 import sys
@@ -32,15 +33,18 @@ class WindowLabel:
 
     Attributes:
         t_end_s: Time of the window's last sample (s since the stream started).
-        label: Predicted terrain.
+        label: Predicted terrain, from the window and the model's context before it.
         confidence: Its probability.
         latency_s: Time from the window's last sample arriving to its label (s).
+        window_label: What the window alone says (equal to ``label`` for a model without
+            context).
     """
 
     t_end_s: float
     label: str
     confidence: float
     latency_s: float
+    window_label: str = ""
 
 
 @dataclass(frozen=True)
@@ -61,9 +65,13 @@ class PendingWindow:
 class OnlineClassifier:
     """Ring buffer + windowing + classifier, fed one sample at a time.
 
+    Labels fuse each window with the windows that ended up to the model's ``lookback_s``
+    before it (:func:`whiskerid.fuse_context`, by time, so a hop shorter than the window
+    fuses more, overlapping, windows over the same span of signal).
+
     Args:
-        model: A trained :class:`whiskerid.ClassifierModel` (``predict_window``,
-            ``window``, ``rate_hz``).
+        model: A trained :class:`whiskerid.ClassifierModel` (``window_proba``,
+            ``window``, ``rate_hz``, ``labels``, ``lookback_s``).
         hop_s: Time between classified windows (s).
         speed_mps: Robot speed, for models that use it.
         min_fill: Windows holding fewer than this fraction of their samples (lost to I2C
@@ -97,10 +105,11 @@ class OnlineClassifier:
         self._n = 0
         self._next_s: float | None = None
         self._grid = np.arange(model.window) / model.rate_hz
+        self._recent: collections.deque = collections.deque()  # (t_end_s, log p)
 
     def warm_up(self) -> None:
         """Compile the model's path once, so that the first window's latency is honest."""
-        self.model.predict_window(np.zeros(self.model.window), self.speed)
+        self.model.window_proba(np.zeros(self.model.window), self.speed)
 
     def push(self, t_s: float, value: float) -> WindowLabel | None:
         """Add a sample; return a label when a window is due, else None (model run inline)."""
@@ -129,10 +138,19 @@ class OnlineClassifier:
         return PendingWindow(t_s, self._window(t_s), arrived)
 
     def classify(self, pending: PendingWindow) -> WindowLabel:
-        """Run the model on a cut window (features + MLP)."""
-        label, confidence = self.model.predict_window(pending.samples, self.speed)
+        """Run the model on a cut window (features + MLP) and fuse its context."""
+        p = self.model.window_proba(pending.samples, self.speed)
+        lookback = getattr(self.model, "lookback_s", 0.0)
+        recent = self._recent
+        recent.append((pending.t_end_s, np.log(np.maximum(p, 1e-12))))
+        while recent and recent[0][0] < pending.t_end_s - lookback - 1e-9:
+            recent.popleft()
+        fused = np.mean([lp for _, lp in recent], axis=0)
+        k, own = int(np.argmax(fused)), int(np.argmax(p))
+        conf = 1.0 / float(np.sum(np.exp(fused - fused[k])))
         latency = self._clock() - pending.arrived_s
-        return WindowLabel(pending.t_end_s, label, float(confidence), latency)
+        labels = self.model.labels
+        return WindowLabel(pending.t_end_s, labels[k], conf, latency, labels[own])
 
     def _window(self, t_end: float) -> np.ndarray:
         order = np.argsort(self._t)
@@ -261,6 +279,10 @@ class StreamSummary:
             out["truth"] = truth
             out["fraction_correct"] = (
                 round(labels.count(truth) / len(labels), 4) if labels else None
+            )
+            own = [w.window_label for w in self.windows]
+            out["fraction_correct_per_window"] = (
+                round(own.count(truth) / len(own), 4) if own else None
             )
         return out
 

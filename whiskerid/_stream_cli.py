@@ -96,8 +96,9 @@ def _cmd_stream(args, command_error) -> dict:
 
     def show(w):
         if not args.quiet:
+            alone = "" if w.window_label in ("", w.label) else f"  [window alone: {w.window_label}]"
             print(f"t = {w.t_end_s:8.2f} s  {w.label:<12s} p = {w.confidence:.2f}  "
-                  f"({w.latency_s * 1e3:.2f} ms)", file=sys.stderr)  # fmt: skip
+                  f"({w.latency_s * 1e3:.2f} ms){alone}", file=sys.stderr)  # fmt: skip
 
     # A virtual clock never waits, so a worker thread would only fall behind: run inline.
     summary = run_stream(sampler.samples(duration_s=args.duration), online, recorder=recorder,
