@@ -241,15 +241,17 @@ def _classification_stage(out: Path, *, plots: bool, say) -> dict:
     model.save(out / "terrain-model")
     res = evaluate(model, test)
     say(format_confusion(res["confusion"], res["labels"]))
-    say(
-        f"      accuracy on held-out recordings: {res['accuracy']:.3f} ({res['n_windows']} windows)"
-    )
+    say(f"      accuracy on held-out recordings: {res['accuracy']:.3f} ({res['n_windows']} "
+        f"windows; labels resting on {model.context_s:g} s; each window on its own "
+        f"{res['accuracy_per_window']:.3f})")  # fmt: skip
     if plots:
         res["png"] = str(
             plot_confusion(out / "terrain_confusion.png", res["confusion"], res["labels"])
         )
     return {
         "accuracy": res["accuracy"],
+        "accuracy_per_window": res["accuracy_per_window"],
+        "context_s": model.context_s,
         "per_class": res["per_class"],
         "model": str(out / "terrain-model"),
     }
