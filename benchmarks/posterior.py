@@ -7,9 +7,11 @@ cos and sin amplitudes) *sampled* (lmfit cannot marginalise them), flat priors (
 (0, 0.95), the nuisances, log σ), emcee's stretch move, 32 walkers × 5000 steps, seed 0.
 lmfit calls a jitted JAX residual of the same model walker by walker (``vectorize`` is not
 available through lmfit); ours evaluates all walkers of a half-ensemble in one jitted,
-vmapped call. A third line runs ours as shipped (nuisances marginalised analytically).
-Effective samples per second use ζ's integrated autocorrelation time, ESS =
-walkers (steps − 2τ)/τ, for every run alike. Prints one JSON object.
+vmapped call (the free decay on a grid of its near-uniform timestamps, the data packed into
+one argument: see ``whiskerid/_posterior.py``). A third line runs ours as shipped
+(nuisances marginalised analytically). Effective samples per second use ζ's integrated
+autocorrelation time, ESS = walkers (steps − 2τ)/τ, for every run alike. Prints one JSON
+object.
 
 Both run on the same CPUs, one by default (``--cpus 1``; ``--cpus 0``: all the process may
 use). The affinity is set before JAX starts, so XLA's thread pool has that many threads:
@@ -17,8 +19,19 @@ on a small, shared machine, XLA splitting each 16 × 500 loop across threads cos
 hand-offs than it gains (measured: 3-5× slower sin/exp loops on 2 busy cores), and lmfit's
 walker-by-walker calls are single-threaded anyway.
 
+Where a step's time goes (ours, one CPU): emcee's own bookkeeping ≈ 350 µs (the same for
+lmfit; measured with a NumPy log-probability), and per half-ensemble call JAX's dispatch
+and runtime (≈ 70 µs of the step even for a trivial jitted function, emcee's NumPy code
+running slower after it included), a hand-off to XLA's worker thread (XLA runs computations
+above 1000 flops on a worker; on one CPU that is two context switches, ≈ 20 µs) and
+≈ 20 µs of compiled code. ``--sync-dispatch`` turns JAX's
+asynchronous CPU dispatch off for the whole process (``jax_cpu_enable_async_dispatch``,
+read once when JAX creates its CPU client, so it cannot be scoped to the sampler): it
+removes the hand-off for both samplers, lmfit's 32 calls per step included; the JSON says
+which was used (``jax_async_dispatch``).
+
     .venv/bin/python benchmarks/posterior.py [--walkers 32] [--steps 5000] [--lmfit-steps N]
-        [--cpus 1]
+        [--cpus 1] [--sync-dispatch]
 """
 
 # ruff: noqa: E402  (the CPU affinity must be set before JAX starts)
@@ -50,6 +63,10 @@ if __name__ == "__main__":
 
 import emcee
 import jax
+
+if __name__ == "__main__" and "--sync-dispatch" in sys.argv[1:]:
+    # Read when JAX creates its CPU client, i.e. before the first computation.
+    jax.config.update("jax_cpu_enable_async_dispatch", False)
 import jax.numpy as jnp
 import numpy as np
 
@@ -156,6 +173,11 @@ def main(argv=None) -> int:
     ap.add_argument("--steps", type=int, default=5000)
     ap.add_argument("--lmfit-steps", type=int, help="fewer steps for lmfit (rates compared)")
     ap.add_argument("--cpus", type=int, default=1, help="CPUs to run on (0: all allowed)")
+    ap.add_argument(
+        "--sync-dispatch",
+        action="store_true",
+        help="run JAX computations inline (jax_cpu_enable_async_dispatch off), for both",
+    )
     args = ap.parse_args(argv)
     import lmfit
 
@@ -167,6 +189,7 @@ def main(argv=None) -> int:
         "problem": f"one-mode decay, {N} samples; {sampled.z0.size} sampled parameters",
         "settings": {"walkers": args.walkers, "steps": args.steps, "seed": 0},
         "cpus": sorted(os.sched_getaffinity(0)),
+        "jax_async_dispatch": bool(jax.config.read("jax_cpu_enable_async_dispatch")),
         "load_average": [round(x, 2) for x in os.getloadavg()],
         "versions": {
             "emcee": emcee.__version__,

@@ -154,11 +154,13 @@ def test_context_lifts_ambiguous_windows_and_round_trips(tmp_path):
         for k in range(n_rec):
             f = 20.0 if k % 2 == 0 else 60.0
             for _ in range(per):
-                w.append(0.25 * np.sin(2 * np.pi * f * t + g.uniform(0, 6)) + g.standard_normal(200))
+                tone = 0.25 * np.sin(2 * np.pi * f * t + g.uniform(0, 6))
+                w.append(tone + g.standard_normal(200))
                 y.append(k % 2)
                 r.append(k)
+        names = [f"r{i}" for i in range(n_rec)]
         return wi.WindowSet(np.array(w), np.array(y), ("low", "high"), np.array(r),
-                            np.full(len(y), np.nan), [f"r{i}" for i in range(n_rec)], 200.0)  # fmt: skip
+                            np.full(len(y), np.nan), names, 200.0)  # fmt: skip
 
     train, test = windows(8, 30, 6), windows(6, 30, int(rng.integers(100, 200)))
     model = wi.train_classifier(train, config=FAST)
