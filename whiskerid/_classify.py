@@ -607,6 +607,8 @@ def fit_on_features(
     ``config.refit`` (default) the network is then trained again on all of ``ws`` for that
     many epochs. With ``config.ensemble = K > 1``, K networks are trained, each with its
     own seed and its own validation recordings, and their probabilities are averaged.
+    ``context_s`` goes into the model (see :class:`ClassifierModel`); None: each window on
+    its own (:func:`train_classifier` applies :func:`default_context_s`).
     """
     mean = feats.mean(axis=0)
     std = np.maximum(feats.std(axis=0), 1e-6 * (np.abs(mean) + 1.0))
