@@ -322,11 +322,7 @@ class ClassifierModel:
         self.hop = int(hop)
         self.channel = channel
         self.info = dict(info or {})
-        self.context_s = self.window_s if context_s is None else float(context_s)
-        if not self.context_s >= self.window_s - 1e-9:
-            raise ValueError(
-                f"context_s = {context_s!r} is shorter than one window ({self.window_s:g} s)"
-            )
+        self.context_s = self.window_s if context_s is None else context_s
         spec_ = spec
 
         @eqx.filter_jit
@@ -363,6 +359,15 @@ class ClassifierModel:
     def window_s(self) -> float:
         """Window length (s)."""
         return self.spec.window / self.spec.rate_hz
+
+    @property
+    def context_s(self) -> float:
+        """Signal a label rests on (s), at least one window (see the class docstring)."""
+        return self._context_s
+
+    @context_s.setter
+    def context_s(self, value: float) -> None:
+        self._context_s = check_context(value, self.window_s)
 
     @property
     def lookback_s(self) -> float:
@@ -591,6 +596,17 @@ def features_of(ws: WindowSet, spec: FeatureSpec) -> np.ndarray:
     return np.asarray(compute_features(spec, ws.windows, speeds))
 
 
+def check_context(context_s: float, window_s: float) -> float:
+    """``context_s`` as a float, refused (ValueError) when shorter than one window."""
+    context_s = float(context_s)
+    if not context_s >= window_s - 1e-9:
+        raise ValueError(
+            f"context {context_s:g} s is shorter than one window ({window_s:g} s): pass at "
+            "least the window length (one window: no fusion)"
+        )
+    return context_s
+
+
 def default_context_s(features: str, window_s: float) -> float:
     """Default context of a model: :data:`CONTEXT_WINDOWS` windows for ``fitted``, one
     (each window on its own, as in the paper) for ``paper``."""
@@ -610,6 +626,8 @@ def fit_on_features(
     ``context_s`` goes into the model (see :class:`ClassifierModel`); None: each window on
     its own (:func:`train_classifier` applies :func:`default_context_s`).
     """
+    if context_s is not None:  # refused before training, not after
+        check_context(context_s, spec.window / spec.rate_hz)
     mean = feats.mean(axis=0)
     std = np.maximum(feats.std(axis=0), 1e-6 * (np.abs(mean) + 1.0))
     z = (feats - mean) / std

@@ -159,7 +159,6 @@ def _cmd_train(args) -> dict:
     if args.balance:
         config = replace(config, balance=True)
     hop = None if args.hop is None else round(args.hop * ws.rate_hz)
-    _check_context(args.context, args.window)
     model = train_classifier(ws, features=args.features, config=config,
                              use_speed=False if args.no_speed else None,
                              channel=args.channel, hop=hop, context_s=args.context)  # fmt: skip
@@ -173,21 +172,12 @@ def _cmd_train(args) -> dict:
             "use_speed": model.needs_speed, "context_s": model.context_s, **info}  # fmt: skip
 
 
-def _check_context(context_s, window_s):
-    if context_s is not None and not context_s >= window_s - 1e-9:
-        raise CommandError(
-            f"--context {context_s:g} s is shorter than one window ({window_s:g} s); "
-            "pass at least the window length (one window: no fusion)"
-        )
-
-
 def _load_model(path, context_s=None):
     from ._classify import ClassifierModel
 
     model = ClassifierModel.load(path)
     if context_s is not None:
-        _check_context(context_s, model.window_s)
-        model.context_s = float(context_s)
+        model.context_s = context_s  # checked by the model
     return model
 
 

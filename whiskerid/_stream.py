@@ -105,7 +105,7 @@ class OnlineClassifier:
         self._n = 0
         self._next_s: float | None = None
         self._grid = np.arange(model.window) / model.rate_hz
-        self._recent: collections.deque = collections.deque()  # (t_end_s, log p)
+        self._recent: collections.deque = collections.deque()  # (t_end_s, probabilities)
 
     def warm_up(self) -> None:
         """Compile the model's path once, so that the first window's latency is honest."""
@@ -139,15 +139,19 @@ class OnlineClassifier:
 
     def classify(self, pending: PendingWindow) -> WindowLabel:
         """Run the model on a cut window (features + MLP) and fuse its context."""
+        from ._classify import fuse_context
+
         p = self.model.window_proba(pending.samples, self.speed)
         lookback = getattr(self.model, "lookback_s", 0.0)
         recent = self._recent
-        recent.append((pending.t_end_s, np.log(np.maximum(p, 1e-12))))
+        recent.append((pending.t_end_s, p))
         while recent and recent[0][0] < pending.t_end_s - lookback - 1e-9:
-            recent.popleft()
-        fused = np.mean([lp for _, lp in recent], axis=0)
+            recent.popleft()  # fuse_context would skip it too; the deque stays short
+        t_end, probs = zip(*recent, strict=True)
+        fused = fuse_context(np.stack(probs), np.zeros(len(t_end), int), np.asarray(t_end),
+                             lookback_s=lookback)[-1]  # fmt: skip
         k, own = int(np.argmax(fused)), int(np.argmax(p))
-        conf = 1.0 / float(np.sum(np.exp(fused - fused[k])))
+        conf = float(fused[k])
         latency = self._clock() - pending.arrived_s
         labels = self.model.labels
         return WindowLabel(pending.t_end_s, labels[k], conf, latency, labels[own])
