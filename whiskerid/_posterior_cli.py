@@ -6,7 +6,7 @@ from pathlib import Path
 
 from ._calibrate import PINS, read_static_test
 from ._calibrate_cli import add_data_options, load_observation
-from ._posterior import LIKELIHOODS, sample_posterior
+from ._posterior import LIKELIHOODS, MOVES, sample_posterior
 from ._record import load_record
 
 
@@ -24,7 +24,8 @@ def add_posterior(sub, command_error) -> None:
             "on (0, 0.95), f1_hz log-uniform over a decade either side of the fit, sigma_rel "
             "log-uniform on [1e-6, 10]). Writes DIR/posterior.toml (the record with a "
             "[posterior] table), DIR/chain.h5, DIR/corner.png and DIR/trace.png. A run "
-            "shorter than 50 autocorrelation times is reported as not converged."
+            "shorter than 50 autocorrelation times is reported as not converged; --resume "
+            "continues it."
         ),
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
@@ -34,6 +35,13 @@ def add_posterior(sub, command_error) -> None:
     p.add_argument("--walkers", type=int, default=32, help="emcee walkers")
     p.add_argument("--steps", type=int, default=3000, help="steps per walker")
     p.add_argument("--seed", type=int, default=0, help="seed (start and emcee's random state)")
+    p.add_argument(
+        "--move",
+        choices=MOVES,
+        default="de",
+        help="emcee proposal: de (differential evolution; autocorrelation times about a third "
+        "of the stretch move's here), stretch (emcee's default), de-snooker (several modes)",
+    )
     p.add_argument("--likelihood", choices=LIKELIHOODS, default="gaussian")
     p.add_argument("--nu", type=float, default=4.0, help="Student-t degrees of freedom")
     p.add_argument("--resume", action="store_true", help="continue DIR/chain.h5 by --steps")
@@ -68,6 +76,7 @@ def _cmd_posterior(args, command_error) -> dict:
         backend=chain,
         resume=args.resume,
         progress=not (args.quiet or args.json),
+        move=args.move,
         static=static,
         n_modes=args.modes,
         pin=args.pin,
