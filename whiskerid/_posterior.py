@@ -388,17 +388,26 @@ def _grid_columns(tables, grid, degrees, summed=False):
     return [mask, grid["drift"], *cos_cols, *sin_cols]
 
 
+@jax.custom_jvp
 def _sum_all(arrays):
     """``[jnp.sum(a) for a in arrays]`` as one variadic reduction: XLA then sums them all in
     one loop with one accumulator each, where separate sums were one loop each, bound by
     the latency of their single accumulator (10 sums of 16 × 504 products: 67 µs instead of
-    113 µs)."""
+    113 µs). JAX cannot differentiate a reduction with a general body, hence the JVP
+    below: the tangents are summed with ``jnp.sum``, which JAX can also transpose (reverse
+    mode, e.g. NUTS on this log-density)."""
     return jax.lax.reduce(
         tuple(arrays),
         (0.0,) * len(arrays),
         lambda x, y: tuple(a + b for a, b in zip(x, y, strict=True)),
         tuple(range(arrays[0].ndim)),
     )
+
+
+@_sum_all.defjvp
+def _sum_all_jvp(primals, tangents):
+    (arrays,), (dots,) = primals, tangents
+    return _sum_all(arrays), tuple(jnp.sum(t) for t in dots)
 
 
 def _rec_loglik(model, spec, rec, d, w, log_sigma, nu, degrees=None, tables=None):
@@ -873,14 +882,15 @@ def initial_walkers(prob: Problem, n_walkers: int, rng: np.random.Generator) -> 
 def emcee_moves(move: str):
     """The emcee moves for a name in :data:`MOVES`.
 
-    ``de``: differential evolution (ter Braak 2006; emcee's ``DEMove``: a walker steps
-    along ``γ (x_j − x_k)`` for two walkers of the other half, ``γ ~ N(γ₀, (10⁻⁵ γ₀)²)``,
-    ``γ₀ = 2.38/√(2 ndim)``, the optimal random-walk scale for a Gaussian target). The
-    proposal uses the ensemble's own spread and correlations, as the stretch move does, but
-    its step length does not shrink with the dimension the way the stretch move's one-axis
-    proposals do. ``stretch``: emcee's default (Goodman & Weare 2010), as in lmfit's
-    ``Minimizer.emcee``. ``de-snooker``: DE 80 %, DE-snooker 20 % (for posteriors with
-    several modes).
+    ``de``: differential evolution (ter Braak 2006; emcee's ``DEMove``, after Nelson et al.
+    2014): a walker steps by ``γ (x_j − x_k)`` for two walkers ``j ≠ k`` of the other half,
+    ``γ ~ N(γ₀, (10⁻⁵ γ₀)²)``, ``γ₀ = 2.38/√(2 ndim)``. The differences carry the ensemble's
+    spread and correlations, as the stretch move's lines do, and ``γ₀`` is the optimal
+    random-walk scale for a Gaussian target in ``ndim`` dimensions, where the stretch move's
+    scale (``a = 2``) is the same in any dimension; on these nearly Gaussian posteriors the
+    autocorrelation times come out about three times shorter. ``stretch``: emcee's default
+    (Goodman & Weare 2010), as in lmfit's ``Minimizer.emcee``. ``de-snooker``: DE 80 %,
+    DE-snooker 20 % (ter Braak & Vrugt 2008; for posteriors with several modes).
     """
     import emcee
 
