@@ -12,11 +12,11 @@ gives intervals that are too narrow, and the spread of the per-recording medians
 repeats is the more honest measure of what is known about ζ.
 
 Run length: each chain runs ``--steps`` (4000) and, while it is shorter than 50 τ, is
-extended to 1.1 × the length the current τ asks for, up to ``--max-steps`` (12000); pooled
-runs over the repeats needed about 3400-3900 steps, more than the per-recording ones. Every
-run reports τ, the steps it ran, the steps 50 τ needs and whether it reached them (a run
-stopped by the cap says ``converged: false``). Prints one JSON object; writes corner/trace
-plots into ``--out``.
+extended to 1.1 × the length the current τ asks for, up to ``--max-steps`` (12000); with
+the default (differential-evolution) move pooled runs over the repeats need about 1200
+steps (τ ≈ 24) and per-recording ones about 550 (τ ≈ 11). Every run reports τ, the steps
+it ran, the steps 50 τ needs and whether it reached them (a run stopped by the cap says
+``converged: false``). Prints one JSON object; writes corner/trace plots into ``--out``.
 
     .venv/bin/python examples/posterior_cantilever.py [--steps 4000] [--max-steps 12000]
         [--out DIR]

@@ -164,9 +164,10 @@ def _posterior_stage(out: Path, record, obs, *, plots: bool, say) -> dict:
     """emcee posterior of the calibrated pluck's ζ and f_1 (a short, converged run)."""
     from ._posterior import sample_posterior
 
-    say("[5] posterior of zeta with emcee: the calibrated pluck, 32 walkers x 2000 steps")
-    # 2000 steps: tau is about 35 steps here, and 50 tau is the convergence criterion.
-    post = sample_posterior(record, obs, walkers=32, steps=2000, seed=0)
+    say("[5] posterior of zeta with emcee: the calibrated pluck, 32 walkers x 1000 steps")
+    # 1000 steps: tau is about 11 steps here with the default (differential-evolution)
+    # move, and 50 tau is the convergence criterion.
+    post = sample_posterior(record, obs, walkers=32, steps=1000, seed=0)
     z, f = post.params["zeta"], post.params["f1_hz"]
     d = post.diagnostics
     say(
