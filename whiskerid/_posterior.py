@@ -952,9 +952,8 @@ def run_sampler(
         else:
             be.reset(walkers, ndim)
     sampler = emcee.EnsembleSampler(
-        walkers, ndim, prob._emcee_log_prob(), vectorize=True, backend=be,
-        moves=moves,
-    )  # fmt: skip
+        walkers, ndim, prob._emcee_log_prob(), vectorize=True, backend=be, moves=moves
+    )
     if resume:
         state = be.get_last_sample()
         if state.random_state is None:
