@@ -17,28 +17,24 @@ default of :func:`whiskerid.sample_posterior`). Effective samples per second use
 integrated autocorrelation time, ESS = walkers (steps − 2τ)/τ, for every run alike. Prints
 one JSON object.
 
-A bound on the same-settings ratio: emcee's own work per step (two proposals, the
-acceptance loop, the random-state copy, the in-memory backend: ≈ 350-400 µs on one CPU here,
-measured with a NumPy log-probability) is paid by both samplers, so even a free
-log-probability could be at most (lmfit's step) / (emcee's step) ≈ 8.5 ms / 0.39 ms ≈ 22×
-faster in evaluations per second, and a JAX call costs ≥ 18 µs of dispatch (two per step).
-
 Both run on the same CPUs, one by default (``--cpus 1``; ``--cpus 0``: all the process may
 use). The affinity is set before JAX starts, so XLA's thread pool has that many threads:
 on a small, shared machine, XLA splitting each 16 × 500 loop across threads costs more in
 hand-offs than it gains (measured: 3-5× slower sin/exp loops on 2 busy cores), and lmfit's
 walker-by-walker calls are single-threaded anyway.
 
-Where a step's time goes (ours, one CPU): emcee's own bookkeeping ≈ 350 µs (the same for
-lmfit; measured with a NumPy log-probability), and per half-ensemble call JAX's dispatch
-and runtime (≈ 70 µs of the step even for a trivial jitted function, emcee's NumPy code
-running slower after it included), a hand-off to XLA's worker thread (XLA runs computations
-above 1000 flops on a worker; on one CPU that is two context switches, ≈ 20 µs) and
-≈ 20 µs of compiled code. ``--sync-dispatch`` turns JAX's
-asynchronous CPU dispatch off for the whole process (``jax_cpu_enable_async_dispatch``,
-read once when JAX creates its CPU client, so it cannot be scoped to the sampler): it
-removes the hand-off for both samplers, lmfit's 32 calls per step included; the JSON says
-which was used (``jax_async_dispatch``).
+Where a step's time goes (ours, one CPU): emcee's own work ≈ 350-400 µs (two proposals, the
+acceptance loop, the random-state copy, the in-memory backend; measured with a NumPy
+log-probability), paid by lmfit too, so that even a free log-probability could be at most
+(lmfit's step) / (emcee's step) ≈ 8.5 ms / 0.39 ms ≈ 22× faster with the same settings;
+and per half-ensemble call (two per step) JAX's dispatch and runtime (≈ 70 µs of the step
+even for a trivial jitted function, emcee's NumPy code running slower after it included),
+a hand-off to XLA's worker thread (XLA runs computations above 1000 flops on a worker; on
+one CPU that is two context switches, ≈ 20 µs) and ≈ 20 µs of compiled code.
+``--sync-dispatch`` turns JAX's asynchronous CPU dispatch off for the whole process
+(``jax_cpu_enable_async_dispatch``, read once when JAX creates its CPU client, so it cannot
+be scoped to the sampler): it removes the hand-off for both samplers, lmfit's 32 calls per
+step included; the JSON says which was used (``jax_async_dispatch``).
 
     .venv/bin/python benchmarks/posterior.py [--walkers 32] [--steps 5000] [--lmfit-steps N]
         [--cpus 1] [--sync-dispatch]
