@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import whiskerid as wi
-from whiskerid._classify import confusion_matrix, format_confusion, grouped_split
+from whiskerid._classify import confusion_matrix, default_spec, format_confusion, grouped_split
 from whiskerid._cli import main
 from whiskerid._mlp import TrainConfig, train_mlp
 
@@ -66,6 +66,16 @@ def test_split_by_recording_keeps_recordings_whole():
     assert not set(train.recording) & set(test.recording)
     assert set(test.labels) == {0, 1} and len(train) + len(test) == len(ws)
     assert grouped_split(ws, 0.25, 0).sum() == len(test)
+
+
+def test_absolute_octave_levels_only_with_the_speed():
+    """Without the speed a level says how fast a run went as much as what the ground is."""
+    ws = _toy_windows()
+    assert not default_spec(ws).octave_bands and not default_spec(ws).use_speed
+    spec = default_spec(replace(ws, speeds=np.full(len(ws), 0.2)))
+    assert spec.octave_bands and spec.use_speed
+    n_oct = len(spec.octave_edges()) - 1
+    assert spec.n_features == replace(spec, octave_bands=False).n_features + n_oct
 
 
 def test_train_save_load_round_trip_and_refusals(tmp_path):

@@ -1,5 +1,8 @@
 """Features: sub-bin peaks, band energies, shapes under jit/vmap, both pipelines."""
 
+import itertools
+from dataclasses import replace
+
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -39,9 +42,11 @@ def test_resonance_fit_finds_a_damped_mode():
     assert bool(ok) and abs(float(fd) - 46.0) < 2.0 and 0.01 < float(z) < 0.12
 
 
-@pytest.mark.parametrize("rate, window, use_speed", [(200.0, 200, True), (100.0, 150, False)])
-def test_fitted_features_shapes_any_rate_and_window(rate, window, use_speed):
-    spec = wi.FeatureSpec(rate_hz=rate, window=window, use_speed=use_speed)
+@pytest.mark.parametrize(
+    "rate, window, use_speed, octaves", [(200.0, 200, True, True), (100.0, 150, False, False)]
+)
+def test_fitted_features_shapes_any_rate_and_window(rate, window, use_speed, octaves):
+    spec = wi.FeatureSpec(rate_hz=rate, window=window, use_speed=use_speed, octave_bands=octaves)
     x = np.random.default_rng(1).standard_normal((5, window))
     feats = wi.compute_features(spec, x, np.full(5, 0.2) if use_speed else None)
     assert feats.shape == (5, spec.n_features) and np.isfinite(np.asarray(feats)).all()
@@ -49,6 +54,54 @@ def test_fitted_features_shapes_any_rate_and_window(rate, window, use_speed):
     feats2 = wi.compute_features(spec, 10 * x + 3, np.full(5, 0.2) if use_speed else None)
     np.testing.assert_allclose(feats2[:, 0] - feats[:, 0], np.log(10), atol=1e-9)
     np.testing.assert_allclose(feats2[:, 6:20], feats[:, 6:20], atol=1e-6)
+
+
+def _octave_block(spec, feats):
+    """The octave-band levels in a feature vector (no speed features)."""
+    start = replace(spec, octave_bands=False).n_features
+    return np.asarray(feats)[:, start : start + len(spec.octave_edges()) - 1]
+
+
+def test_octave_bands_are_the_raw_power_per_octave():
+    """Checked against NumPy: the Hann-windowed power of the raw window, summed per octave
+    (edges Δf, 2Δf, … and Nyquist, the last band closed); a gain g adds 2 log g."""
+    spec = wi.FeatureSpec(rate_hz=200.0, window=200, octave_bands=True)
+    assert spec.octave_edges() == (1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0, 100.0)
+    assert wi.FeatureSpec(rate_hz=100.0, window=64).octave_edges()[-1] == 50.0
+    x = 3.0 + np.random.default_rng(7).standard_normal((4, 200))
+    w = np.hanning(200)
+    p = np.abs(np.fft.rfft((x - x.mean(1, keepdims=True)) * w)) ** 2 / np.sum(w**2)
+    f = np.fft.rfftfreq(200, 1 / 200.0)
+    edges = spec.octave_edges()
+    want = np.stack(
+        [p[:, (f >= lo) & ((f < hi) | (hi == edges[-1]) & (f == hi))].sum(1)
+         for lo, hi in itertools.pairwise(edges)], axis=1
+    )  # fmt: skip
+    got = _octave_block(spec, wi.compute_features(spec, x))
+    np.testing.assert_allclose(got, np.log(want), atol=1e-4)
+    got10 = _octave_block(spec, wi.compute_features(spec, 10 * x))
+    np.testing.assert_allclose(got10 - got, 2 * np.log(10), atol=1e-9)
+
+
+def test_octave_levels_ignore_a_loud_line_elsewhere():
+    """A loud drivetrain-like line at 40 Hz lowers the share of the low band but leaves
+    the power in the low octaves where it was (what the octave levels are for)."""
+    spec = wi.FeatureSpec(rate_hz=200.0, window=200, octave_bands=True)
+    rng = np.random.default_rng(8)
+    t = np.arange(200) / 200.0
+    slow = np.cumsum(rng.standard_normal((8, 200)), axis=1) * 0.05  # most power < 4 Hz
+    loud = slow + 3.0 * np.sin(2 * np.pi * 40.0 * t)
+    quiet_f, loud_f = (np.asarray(wi.compute_features(spec, s)) for s in (slow, loud))
+    np.testing.assert_allclose(_octave_block(spec, loud_f)[:, :2],
+                               _octave_block(spec, quiet_f)[:, :2], atol=0.05)  # fmt: skip
+    assert np.all(quiet_f[:, 6] - loud_f[:, 6] > 1.0)  # first relative band energy (log)
+
+
+def test_model_files_without_octave_bands_keep_their_features():
+    spec = wi.FeatureSpec(octave_bands=True)
+    old = {k: v for k, v in spec.to_dict().items() if k != "octave_bands"}
+    assert wi.FeatureSpec.from_dict(old).octave_bands is False
+    assert wi.FeatureSpec.from_dict(spec.to_dict()) == spec
 
 
 def test_paper_features_are_fft_magnitudes_of_the_standardised_window():

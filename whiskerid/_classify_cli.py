@@ -63,7 +63,8 @@ def add_classify_commands(sub, command_error) -> None:
             "into windows. --features paper: standardise + |FFT| and the paper's 7-layer "
             "network; fitted: spectral peaks with sub-bin interpolation, band energies and "
             "spectral shape, a closed-form resonance estimate, time-domain and envelope "
-            "statistics, and speed-normalised forms when every recording has speed_mps, "
+            "statistics, and, when every recording has speed_mps, speed-normalised forms "
+            "and absolute levels in octave bands, "
             "with one small network. Early stopping on held-out recordings chooses the "
             "number of epochs; the network is then refitted on all windows."
         ),

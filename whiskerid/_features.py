@@ -20,6 +20,14 @@ them, and goes into model files):
     spectrum by Levenberg–Marquardt (``_lsq.least_squares``, never raising; vmapped over
     windows): damped frequency ``f_n√(1 − ζ²)``, ``ζ``, gain × amplitude ``A`` (times the
     window RMS) and the floor-to-peak ratio, plus the fit's ``ok`` flag;
+  - absolute levels in octave bands (``octave_bands``): ``log`` of the window's power in
+    ``[Δf, 2Δf), [2Δf, 4Δf), …`` up to Nyquist (``Δf`` the bin spacing), not divided by
+    the total. The relative band energies above are shares of the total power, so one
+    strong component elsewhere (a loud drivetrain line at 20–65 Hz) lowers every other
+    share; these levels do not move with it, and the octaves resolve the lowest bins
+    (soft ground moves the body most at 0.5–3 Hz, one or two bins of a 1 s window, all
+    inside the first equal-width band). Used with the speed: without it, a level says
+    as much about how fast a run went as about the ground;
   - when the speed ``v`` is known (``use_speed``): a texture of wavelength ``λ`` appears at
     ``f = v/λ`` (NOTES §5), so the spectrum is also summarised on the *spatial* frequency
     ``n = f/v`` (cycles/m): relative energies in log-spaced bands over
@@ -57,6 +65,9 @@ class FeatureSpec:
         n_bands: Equal-width bands from 0 to Nyquist (fitted).
         n_peaks: Spectral peaks reported (dominant first) (fitted).
         modal_fit: Fit a resonance per window (fitted).
+        octave_bands: Add absolute log power in octave bands (fitted). False by default
+            so that model files written before it existed keep their features;
+            :func:`whiskerid.train_classifier` turns it on when the speed is known.
         use_speed: Add speed-normalised features; windows then need a speed (fitted).
         n_spatial_bands: Log-spaced spatial-frequency bands (fitted, with speed).
         spatial_lo: Lowest spatial frequency (cycles/m).
@@ -71,6 +82,7 @@ class FeatureSpec:
     n_bands: int = 16
     n_peaks: int = 3
     modal_fit: bool = False
+    octave_bands: bool = False
     use_speed: bool = False
     n_spatial_bands: int = 10
     spatial_lo: float = 10.0
@@ -106,7 +118,16 @@ class FeatureSpec:
             return self.window
         n = 6 + self.n_bands + 2 + 6 + 2 + self.n_bands // 2 + 6 + 3 * self.n_peaks + 2
         n += 5 if self.modal_fit else 0
+        n += len(self.octave_edges()) - 1 if self.octave_bands else 0
         return n + (self.n_spatial_bands + 4 if self.use_speed else 0)
+
+    def octave_edges(self) -> tuple[float, ...]:
+        """Edges (Hz) of the octave bands: ``Δf, 2Δf, 4Δf, …``, closed at Nyquist."""
+        df, nyq = self.rate_hz / self.window, self.rate_hz / 2
+        edges = [df]
+        while 2 * edges[-1] < nyq * (1 - 1e-9):
+            edges.append(2 * edges[-1])
+        return (*edges, nyq)
 
     def to_dict(self) -> dict:
         """JSON-able form (model files)."""
@@ -347,6 +368,11 @@ def fitted_features(
             jnp.stack([fd / nyq, zeta, jnp.log(amp + _EPS) + log_rms,
                        jnp.log(floor + _EPS) - 2 * jnp.log(amp + _EPS), ok.astype(float)])
         )  # fmt: skip
+    if spec.octave_bands:
+        # Shares of the standardised window's power, times its total and the variance:
+        # the raw window's power per octave.
+        o_share = band_energies(freqs, power, jnp.asarray(spec.octave_edges()))
+        parts.append(jnp.log(o_share + 1e-8) + jnp.log(total) + 2 * log_rms)
     if spec.use_speed:
         v = jnp.asarray(speed_mps, dtype=float)
         s_edges = jnp.geomspace(spec.spatial_lo, spec.spatial_hi, spec.n_spatial_bands + 1)
