@@ -28,6 +28,37 @@ def test_mlp_learns_a_separable_toy_problem():
     assert all(np.array_equal(a, b) for a, b in leaves)  # seeded: identical
 
 
+def test_class_weights_change_nothing_when_balanced_and_lift_a_minority():
+    """Inverse-frequency weights (the default for fitted): identical training on equal
+    classes; with 9:1 overlapping classes the minority's recall rises (unweighted, the
+    network leans to the class recorded longest)."""
+    rng = np.random.default_rng(6)
+    y = np.repeat([0, 1], 200)
+    x = rng.standard_normal((400, 2)) + 1.5 * y[:, None]
+    on, off = (train_mlp(x, y, x[:0], y[:0], 2, replace(FAST, balance=b), epochs=40)
+               for b in (True, False))  # fmt: skip
+    leaves = zip(jax.tree_util.tree_leaves(on.model), jax.tree_util.tree_leaves(off.model),
+                 strict=True)  # fmt: skip
+    assert all(np.array_equal(a, b) for a, b in leaves)
+    y = np.repeat([0, 1], [900, 100])
+    x = rng.standard_normal((1000, 1)) + 1.5 * y[:, None]
+    recall = {}
+    for b in (True, False):
+        res = train_mlp(x, y, x[:0], y[:0], 2, replace(FAST, balance=b), epochs=60)
+        pred = np.argmax(np.asarray(wi._mlp.predict_proba(res.model, x)), axis=1)
+        recall[b] = np.mean(pred[y == 1] == 1)
+    assert recall[True] > recall[False] + 0.2, recall
+    assert TrainConfig().balance and not wi._mlp.PAPER_CONFIG.balance
+
+
+def test_train_refuses_negative_regularisation_before_reading(tmp_path, capsys):
+    args = ["train", str(tmp_path / "none"), "--out", str(tmp_path / "m")]
+    assert main([*args, "--weight-decay", "-1"]) == 2
+    assert "--weight-decay must be at least 0" in capsys.readouterr().err
+    assert main([*args, "--input-noise", "nan"]) == 2
+    assert "--input-noise must be at least 0" in capsys.readouterr().err
+
+
 def test_full_batch_and_fixed_epoch_refit():
     """The default full-batch training learns; ``epochs=`` trains exactly that long on
     everything (no validation rows) and keeps the final parameters."""

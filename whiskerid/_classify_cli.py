@@ -85,7 +85,16 @@ def add_classify_commands(sub, command_error) -> None:
         "--max-epochs", type=int, help="epoch limit (1500 for fitted, 300 for paper by default)"
     )
     t.add_argument("--ensemble", type=int, help="networks averaged (1 by default)")
-    t.add_argument("--balance", action="store_true", help="weight classes by inverse frequency")
+    t.add_argument(
+        "--balance", action=argparse.BooleanOptionalAction, default=None,
+        help="weight classes by inverse frequency, so each counts alike whatever the time "
+        "recorded on it (default for fitted; the paper preset does not)",
+    )  # fmt: skip
+    t.add_argument("--weight-decay", type=float, metavar="W",
+                   help="decoupled weight decay (1.0 for fitted by default)")  # fmt: skip
+    t.add_argument("--input-noise", type=float, metavar="S",
+                   help="Gaussian noise on the standardised inputs while training "
+                   "(0.3 for fitted by default)")  # fmt: skip
     t.add_argument(
         "--context", type=float, metavar="S",
         help=_CONTEXT_HELP + "; 3 windows for fitted, 1 for paper by default",
@@ -144,6 +153,10 @@ def _cmd_train(args) -> dict:
 
     if args.window <= 0:
         raise CommandError("--window must be positive")
+    for name in ("weight_decay", "input_noise"):
+        value = getattr(args, name)
+        if value is not None and not value >= 0:  # refused before any work
+            raise CommandError(f"--{name.replace('_', '-')} must be at least 0, not {value:g}")
     ws = load_dataset(args.dataset, channel=args.channel, window_s=args.window,
                       hop_s=args.hop, rate_hz=args.rate)  # fmt: skip
     config = replace(default_config(args.features), seed=args.seed)
@@ -157,8 +170,11 @@ def _cmd_train(args) -> dict:
         if args.ensemble < 1:
             raise CommandError("--ensemble must be at least 1")
         config = replace(config, ensemble=args.ensemble)
-    if args.balance:
-        config = replace(config, balance=True)
+    if args.balance is not None:
+        config = replace(config, balance=args.balance)
+    for name in ("weight_decay", "input_noise"):
+        if getattr(args, name) is not None:
+            config = replace(config, **{name: getattr(args, name)})
     hop = None if args.hop is None else round(args.hop * ws.rate_hz)
     model = train_classifier(ws, features=args.features, config=config,
                              use_speed=False if args.no_speed else None,
