@@ -5,6 +5,8 @@ IMU axes (``--channels all``: gyro and accelerometer, closer to the inputs of th
 93.96 %), each with the paper's pipeline and ours. Every split holds out whole runs (about
 a quarter per terrain), so no run has windows on both sides. Each figure comes per window
 (the paper's task) and with labels resting on three windows (:func:`whiskerid.fuse_context`).
+Our network weights the classes alike (the library's default: 27 snow runs, 7 asphalt) and
+uses weight decay 3 here (``FITTED_WEIGHT_DECAY``).
 
 For comparison with the published figures, ``--repeats N`` (default 5) also runs the
 random-window protocol (:func:`whiskerid.paper_protocol`: random 75/25 split of the
@@ -39,6 +41,11 @@ from whiskerid._classify import (
 from whiskerid._mlp import default_config
 
 REPO = Path(__file__).resolve().parent.parent
+#: Weight decay of our network here (the library's default, 1, was chosen on the synthetic
+#: set). Chosen on five selection splits by run (``grouped_split`` seeds 10-14), never on
+#: the report splits (seeds 0, 1, 2): with six channels of features and 51 training runs
+#: the network needs more restraint (+1.3 points per window on the report splits).
+FITTED_WEIGHT_DECAY = 3.0
 #: Labels from each window on its own, and from the window and the two before it (the
 #: context a trained ``fitted`` model uses by default; with ``--hop`` shorter than the
 #: window, the same span of signal: 2 × window of look-back).
@@ -54,6 +61,8 @@ def main() -> None:
     ap.add_argument("--window", type=float, default=1.0, help="window (s)")
     ap.add_argument("--hop", type=float, help="step between windows (s); the window by default")
     ap.add_argument("--splits", type=int, default=3, help="random splits by run")
+    ap.add_argument("--weight-decay", type=float, default=FITTED_WEIGHT_DECAY,
+                    help="weight decay of our network (see FITTED_WEIGHT_DECAY)")  # fmt: skip
     ap.add_argument("--repeats", type=int, default=5,
                     help="random-window protocol repeats (0: skip it)")  # fmt: skip
     args = ap.parse_args()
@@ -72,9 +81,10 @@ def main() -> None:
             res_c[kind] = {}
             for s in range(args.splits):
                 test = grouped_split(ws, 0.25, seed=s)  # whole runs
-                model = fit_on_features(
-                    feats[~test], ws.subset(~test), spec, replace(default_config(kind), seed=s)
-                )
+                cfg = replace(default_config(kind), seed=s)
+                if kind == "fitted":
+                    cfg = replace(cfg, weight_decay=args.weight_decay)
+                model = fit_on_features(feats[~test], ws.subset(~test), spec, cfg)
                 for name, k in CONTEXTS.items():
                     model.context_s = k * model.window_s
                     res = evaluate_features(model, feats[test], ws.subset(test))
@@ -93,7 +103,8 @@ def main() -> None:
                 res_c[kind][name]["accuracy_by_split"] = [round(x, 4) for x in a]
                 res_c[kind][name]["accuracy_mean"] = round(float(np.mean(a)), 4)
             if args.repeats:
-                pp = wi.paper_protocol(ws, features=kind, repeats=args.repeats, seed=0)
+                pp = wi.paper_protocol(ws, features=kind, repeats=args.repeats, seed=0,
+                                       config=cfg)  # fmt: skip
                 res_c[kind]["random_windows"] = {
                     k: pp[k] for k in ("accuracy_mean", "accuracy_std", "per_class", "repeats")
                 }
