@@ -153,12 +153,7 @@ def _cmd_train(args) -> dict:
 
     if args.window <= 0:
         raise CommandError("--window must be positive")
-    for name in ("weight_decay", "input_noise"):
-        value = getattr(args, name)
-        if value is not None and not value >= 0:  # refused before any work
-            raise CommandError(f"--{name.replace('_', '-')} must be at least 0, not {value:g}")
-    ws = load_dataset(args.dataset, channel=args.channel, window_s=args.window,
-                      hop_s=args.hop, rate_hz=args.rate)  # fmt: skip
+    # Settings first: bad ones are refused before the data is read.
     config = replace(default_config(args.features), seed=args.seed)
     if args.max_epochs is not None:
         if args.max_epochs < 1:
@@ -173,8 +168,13 @@ def _cmd_train(args) -> dict:
     if args.balance is not None:
         config = replace(config, balance=args.balance)
     for name in ("weight_decay", "input_noise"):
-        if getattr(args, name) is not None:
-            config = replace(config, **{name: getattr(args, name)})
+        value = getattr(args, name)
+        if value is not None:
+            if not value >= 0:
+                raise CommandError(f"--{name.replace('_', '-')} must be at least 0, not {value:g}")
+            config = replace(config, **{name: value})
+    ws = load_dataset(args.dataset, channel=args.channel, window_s=args.window,
+                      hop_s=args.hop, rate_hz=args.rate)  # fmt: skip
     hop = None if args.hop is None else round(args.hop * ws.rate_hz)
     model = train_classifier(ws, features=args.features, config=config,
                              use_speed=False if args.no_speed else None,
