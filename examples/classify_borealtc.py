@@ -79,12 +79,13 @@ def main() -> None:
             feats = features_of(ws, spec)
             accs = {name: [] for name in CONTEXTS}
             res_c[kind] = {}
+            cfg = default_config(kind)
+            if kind == "fitted":
+                cfg = replace(cfg, weight_decay=args.weight_decay)
             for s in range(args.splits):
                 test = grouped_split(ws, 0.25, seed=s)  # whole runs
-                cfg = replace(default_config(kind), seed=s)
-                if kind == "fitted":
-                    cfg = replace(cfg, weight_decay=args.weight_decay)
-                model = fit_on_features(feats[~test], ws.subset(~test), spec, cfg)
+                model = fit_on_features(feats[~test], ws.subset(~test), spec,
+                                        replace(cfg, seed=s))  # fmt: skip
                 for name, k in CONTEXTS.items():
                     model.context_s = k * model.window_s
                     res = evaluate_features(model, feats[test], ws.subset(test))
