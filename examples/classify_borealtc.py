@@ -8,6 +8,14 @@ a quarter per terrain), so no run has windows on both sides. Each figure comes p
 Our network weights the classes alike (the library's default: 27 snow runs, 7 asphalt) and
 uses weight decay 3 here (``FITTED_WEIGHT_DECAY``).
 
+``--folds K`` (default 8) also cross-validates by run (:func:`whiskerid.cross_validate`):
+every run is tested once, by a network trained on the other 7/8 of the runs; ``--folds``
+equal to the number of runs (68) leaves one run out. ``--learning-curve`` trains our
+pipeline on a third, a half, three quarters and all of each split's training runs (same
+held-out runs) and plots the accuracy against the number of training runs
+(``learning_curve.png``): with 7 asphalt and 8 flooring runs the figure is limited by
+how many runs there are to learn from.
+
 For comparison with the published figures, ``--repeats N`` (default 5) also runs the
 random-window protocol (:func:`whiskerid.paper_protocol`: random 75/25 split of the
 windows, N times): BorealTC's own code draws its folds the same way, from fixed-length
@@ -63,6 +71,10 @@ def main() -> None:
     ap.add_argument("--splits", type=int, default=3, help="random splits by run")
     ap.add_argument("--weight-decay", type=float, default=FITTED_WEIGHT_DECAY,
                     help="weight decay of our network (see FITTED_WEIGHT_DECAY)")  # fmt: skip
+    ap.add_argument("--folds", type=int, default=8,
+                    help="cross-validation by run: K folds (0: skip; 68: one run out)")  # fmt: skip
+    ap.add_argument("--learning-curve", action="store_true",
+                    help="accuracy against training runs (all IMU, ours)")  # fmt: skip
     ap.add_argument("--repeats", type=int, default=5,
                     help="random-window protocol repeats (0: skip it)")  # fmt: skip
     args = ap.parse_args()
@@ -103,6 +115,17 @@ def main() -> None:
             for name, a in accs.items():
                 res_c[kind][name]["accuracy_by_split"] = [round(x, 4) for x in a]
                 res_c[kind][name]["accuracy_mean"] = round(float(np.mean(a)), 4)
+            if args.folds:
+                cv = wi.cross_validate(ws, features=kind, folds=args.folds, config=cfg,
+                                       context_s=CONTEXTS["context_3_windows"] * args.window,
+                                       progress=True)  # fmt: skip
+                res_c[kind]["cross_validation"] = {
+                    k: cv[k] for k in ("accuracy_per_window", "accuracy", "per_class", "folds",
+                                       "accuracy_by_fold", "per_recording")
+                }  # fmt: skip
+                print(f"{chans} {kind} {args.folds}-fold by run: "
+                      f"{cv['accuracy_per_window']:.3f} / {cv['accuracy']:.3f}",
+                      file=sys.stderr)  # fmt: skip
             if args.repeats:
                 pp = wi.paper_protocol(ws, features=kind, repeats=args.repeats, seed=0,
                                        config=cfg)  # fmt: skip
@@ -111,9 +134,56 @@ def main() -> None:
                 }
                 print(f"{chans} {kind} random windows: {pp['accuracy_mean']:.3f} "
                       f"± {pp['accuracy_std']:.3f}", file=sys.stderr)  # fmt: skip
+        if args.learning_curve and chans == "all":
+            res_c["learning_curve"] = learning_curve(ws, args, args.out / "learning_curve.png")
         res_c["elapsed_s"] = round(time.perf_counter() - t0, 1)
         out[chans] = res_c
     print(json.dumps(out, indent=1))
+
+
+def learning_curve(ws: wi.WindowSet, args, png: Path) -> dict:
+    """Our pipeline trained on fractions of each split's training runs (kept per terrain,
+    at least one run each), tested on the same held-out runs; saved as a plot."""
+    spec = default_spec(ws, "fitted")
+    feats = features_of(ws, spec)
+    cfg = replace(default_config("fitted"), weight_decay=args.weight_decay)
+    fractions, acc = (1 / 3, 1 / 2, 3 / 4, 1.0), {}
+    for s in range(args.splits):
+        test = grouped_split(ws, 0.25, seed=s)
+        rng = np.random.default_rng(100 + s)
+        for frac in fractions:
+            keep = ~test
+            for k in range(len(ws.label_names)):
+                runs = rng.permutation(np.unique(ws.recording[keep & (ws.labels == k)]))
+                keep &= ~np.isin(ws.recording, runs[max(1, round(frac * runs.size)) :])
+            model = fit_on_features(feats[keep], ws.subset(keep), spec, replace(cfg, seed=s))
+            for name, k in CONTEXTS.items():
+                model.context_s = k * model.window_s
+                res = evaluate_features(model, feats[test], ws.subset(test))
+                acc.setdefault((frac, name), []).append(res["accuracy"])
+            acc.setdefault((frac, "runs"), []).append(np.unique(ws.recording[keep]).size)
+    out = {
+        f"{frac:.3f}": {name: round(float(np.mean(acc[frac, name])), 4)
+                        for name in ("runs", *CONTEXTS)}
+        for frac in fractions
+    }  # fmt: skip
+    from whiskerid._plot import _pyplot
+
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(5, 3.5))
+    runs = [out[f]["runs"] for f in out]
+    for name in CONTEXTS:
+        ax.plot(runs, [100 * out[f][name] for f in out], "o-", label=name.replace("_", " "))
+    ax.set_xlabel("training runs")
+    ax.set_ylabel("accuracy on held-out runs (%)")
+    ax.set_title(f"BorealTC, all IMU, ours: mean of {args.splits} splits by run")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(png, dpi=120)
+    plt.close(fig)
+    print(f"learning curve: {out} -> {png}", file=sys.stderr)
+    return out
 
 
 if __name__ == "__main__":

@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 
 import whiskerid as wi
-from whiskerid._classify import confusion_matrix, default_spec, format_confusion, grouped_split
+from whiskerid._classify import (
+    confusion_matrix,
+    default_spec,
+    format_confusion,
+    grouped_split,
+    recording_folds,
+)
 from whiskerid._cli import main
 from whiskerid._mlp import TrainConfig, train_mlp
 
@@ -57,6 +63,8 @@ def test_train_refuses_negative_regularisation_before_reading(tmp_path, capsys):
     assert "--weight-decay must be at least 0" in capsys.readouterr().err
     assert main([*args, "--input-noise", "nan"]) == 2
     assert "--input-noise must be at least 0" in capsys.readouterr().err
+    assert main([*args, "--cv", "1"]) == 2
+    assert "--cv must be at least 2 folds" in capsys.readouterr().err
 
 
 def test_full_batch_and_fixed_epoch_refit():
@@ -75,13 +83,14 @@ def test_full_batch_and_fixed_epoch_refit():
     assert np.mean(pred == y) > 0.9
 
 
-def _toy_windows(n_rec=8, per=10):
-    """Two classes: a 20 Hz or a 60 Hz tone in noise, one recording per row."""
+def _toy_windows(n_rec=8, per=10, tone=lambda r: 20.0 if r % 2 == 0 else 60.0):
+    """Two classes (``r % 2``): by default a 20 Hz or a 60 Hz tone in noise; ``tone(r)``
+    gives recording ``r``'s tone (Hz)."""
     rng = np.random.default_rng(1)
     t = np.arange(200) / 200.0
     wins, labels, recs = [], [], []
     for r in range(n_rec):
-        f = 20.0 if r % 2 == 0 else 60.0
+        f = tone(r)
         for _ in range(per):
             wins.append(np.sin(2 * np.pi * f * t + rng.uniform(0, 6)) + rng.standard_normal(200))
             labels.append(r % 2)
@@ -97,6 +106,38 @@ def test_split_by_recording_keeps_recordings_whole():
     assert not set(train.recording) & set(test.recording)
     assert set(test.labels) == {0, 1} and len(train) + len(test) == len(ws)
     assert grouped_split(ws, 0.25, 0).sum() == len(test)
+
+
+def test_recording_folds_deal_whole_recordings_stratified():
+    ws = _toy_windows(n_rec=12)
+    fold = recording_folds(ws, 3, seed=1)
+    for r in range(12):  # a recording lies in one fold
+        assert np.unique(fold[ws.recording == r]).size == 1
+    for k in range(3):  # each fold: two recordings of each class
+        in_k = np.unique(ws.recording[fold == k])
+        assert np.bincount(np.asarray(in_k) % 2, minlength=2).tolist() == [2, 2]
+    loro = recording_folds(ws, 12, seed=0)
+    assert sorted(np.unique(ws.recording[loro == k]).size for k in range(12)) == [1] * 12
+    for bad in (1, 13):
+        with pytest.raises(ValueError, match="pass 2 to 12"):
+            recording_folds(ws, bad)
+
+
+def test_cross_validation_tests_recordings_a_model_never_saw():
+    """Each recording has its own tone (15 + 5 r Hz) and the labels alternate, so a
+    network can learn every recording's tone but a new recording's neighbours in frequency
+    both carry the other label. Random windows (the paper's protocol) reward the
+    memorising; cross-validation by recording must not."""
+    ws = _toy_windows(n_rec=8, per=12, tone=lambda r: 15.0 + 5.0 * r)
+    cfg = replace(FAST, hidden=(64,), max_epochs=300, patience=300, weight_decay=1e-4,
+                  input_noise=0.0)  # fmt: skip
+    cv = wi.cross_validate(ws, folds=4, config=cfg, context_s=1.0)
+    pp = wi.paper_protocol(ws, features="fitted", repeats=2, config=cfg)
+    assert pp["accuracy_mean"] > 0.65  # measured 0.77 (chance 0.5)
+    assert cv["accuracy"] < 0.4 and cv["n_windows"] == len(ws)  # measured 0.28
+    assert len(cv["per_recording"]) == 8 and len(cv["accuracy_by_fold"]) == 4
+    honest = wi.cross_validate(_toy_windows(n_rec=8), folds=4, config=cfg)
+    assert honest["accuracy"] > 0.9 and honest["context_s"] == 3.0
 
 
 def test_absolute_octave_levels_only_with_the_speed():
@@ -241,10 +282,16 @@ def test_cli_synth_train_evaluate_classify(tmp_path, capsys):
     args = ["--terrains", "brick", "sand", "--speeds", "0.2", "--runs", "2", "--duration", "6"]
     assert main(["dataset", "synth", "--out", str(ds), *args]) == 0
     assert len(list(ds.glob("*/*.csv"))) == 4
-    assert main(["train", str(ds), "--out", str(model), "--hidden", "16", "16",
-                 "--max-epochs", "40", "--ensemble", "1", "--json"]) == 0  # fmt: skip
+    train = ["train", str(ds), "--out", str(model), "--hidden", "16", "16", "--max-epochs", "40"]
+    assert main([*train, "--cv", "5"]) == 2  # four recordings
+    assert "pass 2 to 4" in capsys.readouterr().err and not model.exists()
+    assert main([*train, "--ensemble", "1", "--cv", "2", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["labels"] == ["brick", "sand"] and 20 <= out["windows"] <= 24
+    cv = out["cross_validation"]
+    assert cv["folds"] == 2 and len(cv["accuracy_by_fold"]) == 2 and 0 <= cv["accuracy"] <= 1
+    head = json.loads((model / "model.json").read_text())
+    assert head["training"]["cross_validation"] == cv
     assert main(["evaluate", str(model), str(ds), "--json", "--plot", str(tmp_path / "c.png")]) == 0
     res = json.loads(capsys.readouterr().out)
     assert {"accuracy", "per_class", "confusion", "labels"} <= set(res)

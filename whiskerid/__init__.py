@@ -17,7 +17,8 @@ Public API, re-exported from private modules (SI units throughout):
   Student-t, HDF5 resume, τ-based convergence), :func:`setup_posterior`, :class:`Posterior`;
 * terrain classification: :func:`synthesize_dataset` (simulated terrains),
   :func:`compute_features` / :class:`FeatureSpec`, :func:`load_dataset`,
-  :func:`train_classifier`, :func:`evaluate_classifier`, :func:`paper_protocol`,
+  :func:`train_classifier`, :func:`evaluate_classifier`, :func:`cross_validate`
+  (every recording tested once, by a model that never saw it), :func:`paper_protocol`,
   :func:`fuse_context` (labels from a window and the windows before it), and
   :class:`ClassifierModel` (``predict_window`` / ``window_proba`` for online use);
 * signals and files: :func:`dominant_peaks`, :class:`Recording`, :func:`read_recording`,
@@ -45,6 +46,7 @@ from ._calibrate import read_static_test as read_static_test
 from ._classify import ClassifierModel as ClassifierModel
 from ._classify import ModelError as ModelError
 from ._classify import WindowSet as WindowSet
+from ._classify import cross_validate as cross_validate
 from ._classify import evaluate_classifier as evaluate_classifier
 from ._classify import fuse_context as fuse_context
 from ._classify import load_dataset as load_dataset

@@ -99,6 +99,12 @@ def add_classify_commands(sub, command_error) -> None:
         "--context", type=float, metavar="S",
         help=_CONTEXT_HELP + "; 3 windows for fitted, 1 for paper by default",
     )  # fmt: skip
+    t.add_argument(
+        "--cv", type=int, metavar="K",
+        help="first cross-validate by recording with K folds (every recording tested once by "
+        "a network that never saw it; K = number of recordings: leave one out) and report "
+        "it and keep it in the model file: the accuracy to expect on new recordings",
+    )  # fmt: skip
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     t.set_defaults(func=_cmd_train)
@@ -148,11 +154,13 @@ def _cmd_synth(args) -> dict:
 
 
 def _cmd_train(args) -> dict:
-    from ._classify import load_dataset, train_classifier
+    from ._classify import cross_validate, load_dataset, train_classifier
     from ._mlp import default_config
 
     if args.window <= 0:
         raise CommandError("--window must be positive")
+    if args.cv is not None and args.cv < 2:
+        raise CommandError(f"--cv must be at least 2 folds, not {args.cv}")
     # Settings first: bad ones are refused before the data is read.
     config = replace(default_config(args.features), seed=args.seed)
     if args.max_epochs is not None:
@@ -176,9 +184,21 @@ def _cmd_train(args) -> dict:
     ws = load_dataset(args.dataset, channel=args.channel, window_s=args.window,
                       hop_s=args.hop, rate_hz=args.rate)  # fmt: skip
     hop = None if args.hop is None else round(args.hop * ws.rate_hz)
+    use_speed = False if args.no_speed else None
+    cv = None
+    if args.cv is not None:
+        cv = cross_validate(ws, features=args.features, folds=args.cv, seed=args.seed,
+                            config=config, context_s=args.context, use_speed=use_speed,
+                            progress=sys.stderr.isatty())  # fmt: skip
+        cv = {k: cv[k] for k in ("folds", "accuracy", "accuracy_per_window", "per_class",
+                                 "accuracy_by_fold", "context_s")}  # fmt: skip
+        _say(f"{args.cv}-fold cross-validation by recording: {cv['accuracy']:.3f} "
+             f"({cv['accuracy_per_window']:.3f} per window)")  # fmt: skip
     model = train_classifier(ws, features=args.features, config=config,
-                             use_speed=False if args.no_speed else None,
-                             channel=args.channel, hop=hop, context_s=args.context)  # fmt: skip
+                             use_speed=use_speed, channel=args.channel, hop=hop,
+                             context_s=args.context)  # fmt: skip
+    if cv is not None:
+        model.info["cross_validation"] = cv
     model.save(args.out)
     info = model.info
     _say(f"trained on {len(ws)} windows of {ws.windows.shape[-1]} samples at {ws.rate_hz:g} Hz, "
