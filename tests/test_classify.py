@@ -60,9 +60,9 @@ def test_class_weights_change_nothing_when_balanced_and_lift_a_minority():
 def test_train_refuses_negative_regularisation_before_reading(tmp_path, capsys):
     args = ["train", str(tmp_path / "none"), "--out", str(tmp_path / "m")]
     assert main([*args, "--weight-decay", "-1"]) == 2
-    assert "--weight-decay must be at least 0" in capsys.readouterr().err
+    assert "--weight-decay must be a finite number at least 0" in capsys.readouterr().err
     assert main([*args, "--input-noise", "nan"]) == 2
-    assert "--input-noise must be at least 0" in capsys.readouterr().err
+    assert "--input-noise must be a finite number at least 0" in capsys.readouterr().err
     assert main([*args, "--cv", "1"]) == 2
     assert "--cv must be at least 2 folds" in capsys.readouterr().err
 

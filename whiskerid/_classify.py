@@ -20,6 +20,7 @@
 
 import json
 import sys
+import zipfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -43,6 +44,16 @@ MODEL_WEIGHTS = "weights.npz"
 #: for a label that lags a change of terrain by at most 2 s.
 CONTEXT_WINDOWS = 3
 RECORDING_SUFFIXES = (".csv", ".npz", ".npy")
+#: Fewest samples a window may hold: a spectrum of fewer bins says nothing of a terrain.
+MIN_WINDOW = 16
+#: How far apart the rates of one dataset's recordings, or of a recording and the rate
+#: asked for, may be (one ADS1115's oscillator is good to a few per cent).
+RATE_TOLERANCE = 0.05
+#: How far ``rate_hz`` metadata and the timestamps may disagree (the ADS1115's rate is
+#: specified to ±10 %; a time column in ms is off by a factor of 1000).
+RATE_METADATA_TOLERANCE = 0.15
+#: Timestamp steps longer than this many median steps are gaps that windows never span.
+GAP_STEPS = 10.0
 
 
 class ModelError(ValueError):
@@ -66,6 +77,7 @@ class WindowSet:
         start_s: Start of each window within its recording (s), shape ``(n,)``; None
             when unknown (windows are then taken as consecutive and non-overlapping, in
             recording order, for :func:`fuse_context`).
+        channel: The recorded column the windows come from, where known.
     """
 
     windows: np.ndarray
@@ -76,6 +88,7 @@ class WindowSet:
     sources: list[str]
     rate_hz: float
     start_s: np.ndarray | None = None
+    channel: str | None = None
 
     def __len__(self) -> int:
         return int(self.labels.size)
@@ -107,29 +120,119 @@ class WindowSet:
         return out
 
 
+def timestamp_rate(t: np.ndarray) -> float:
+    """Sample rate from timestamps (Hz): one over the median step."""
+    return 1.0 / float(np.median(np.diff(np.asarray(t, dtype=float))))
+
+
 def recording_rate(rec: Recording) -> float:
-    """A recording's sample rate: its ``rate_hz`` metadata, else the median timestamp step."""
-    if "rate_hz" in rec.meta:
-        try:
-            return float(rec.meta["rate_hz"])
-        except ValueError:
-            raise RecordingError(
-                f"{rec.source}: rate_hz {rec.meta['rate_hz']!r} is not a number"
-            ) from None
-    return 1.0 / float(np.median(np.diff(rec.t)))
+    """A recording's sample rate: its ``rate_hz`` metadata, else the median timestamp step.
+
+    Raises:
+        RecordingError: ``rate_hz`` is not a positive number, or disagrees with the
+            timestamps by more than :data:`RATE_METADATA_TOLERANCE` (time in ms or ns,
+            or the wrong rate written down: either would silently shift every spectrum).
+    """
+    src = rec.source or "recording"
+    stamped = timestamp_rate(rec.t)
+    if "rate_hz" not in rec.meta:
+        return stamped
+    try:
+        rate = float(rec.meta["rate_hz"])
+    except ValueError:
+        rate = float("nan")
+    if not (np.isfinite(rate) and rate > 0):
+        raise RecordingError(f"{src}: rate_hz {rec.meta['rate_hz']!r} is not a positive number")
+    if abs(stamped / rate - 1) > RATE_METADATA_TOLERANCE:
+        raise RecordingError(
+            f"{src}: rate_hz says {rate:g} Hz but the timestamps step by "
+            f"{1 / stamped:.4g} ({stamped:.4g} Hz): the time column must be in seconds "
+            "(convert it), or correct rate_hz"
+        )
+    return rate
+
+
+def check_rate(rec: Recording, rate_hz: float) -> float:
+    """The recording's rate, refused when below ``rate_hz`` (resampling up cannot add
+    the frequencies between the two Nyquist limits; the features would see an empty
+    band and a model would read it as a terrain)."""
+    own = recording_rate(rec)
+    if own < rate_hz * (1 - RATE_TOLERANCE):
+        raise RecordingError(
+            f"{rec.source or 'recording'}: sampled at {own:.4g} Hz, below the {rate_hz:g} Hz "
+            f"needed: record at {rate_hz:g} Hz or more, or use a model (train --rate) at "
+            f"{own:.4g} Hz"
+        )
+    return own
+
+
+def windows_of(
+    t: np.ndarray, x: np.ndarray, *, rate_hz: float, window: int, hop: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Resample ``x(t)`` onto a uniform grid at ``rate_hz`` and cut windows.
+
+    Steps longer than :data:`GAP_STEPS` median steps are gaps (a paused logger, lost
+    samples): windows never straddle them, rather than hold a straight line drawn across.
+    A recording sampled faster than ``rate_hz`` is low-passed first (zero-phase
+    Butterworth at 0.45 ``rate_hz``), so that what lies above the new Nyquist frequency
+    does not fold back into the band.
+
+    Returns:
+        Windows ``(k, window)`` and their start times (s after the first sample).
+    """
+    t, x = np.asarray(t, dtype=float), np.asarray(x, dtype=float)
+    step = float(np.median(np.diff(t))) if t.size > 1 else 1.0 / rate_hz
+    cuts = np.flatnonzero(np.diff(t) > GAP_STEPS * step) + 1
+    wins, starts = [], []
+    for ts, xs in zip(np.split(t, cuts), np.split(x, cuts), strict=True):
+        n = int(np.floor((ts[-1] - ts[0]) * rate_hz * (1 + 1e-9))) + 1
+        if n < window:
+            continue
+        if 1 / step > rate_hz * (1 + RATE_TOLERANCE):
+            xs = _anti_alias(ts, xs, step, rate_hz)
+        xu = np.interp(ts[0] + np.arange(n) / rate_hz, ts, xs)
+        first = np.arange(0, n - window + 1, hop)
+        wins.extend(xu[s : s + window] for s in first)
+        starts.append(ts[0] - t[0] + first / rate_hz)
+    if not wins:
+        return np.zeros((0, window)), np.zeros(0)
+    return np.stack(wins), np.concatenate(starts)
+
+
+def _anti_alias(t: np.ndarray, x: np.ndarray, step: float, rate_hz: float) -> np.ndarray:
+    from scipy.signal import butter, sosfiltfilt
+
+    sos = butter(8, 0.45 * rate_hz, fs=1 / step, output="sos")
+    if x.size <= 3 * (2 * len(sos) + 1):  # too short for filtfilt's padding
+        return x
+    grid = t[0] + np.arange(x.size) * step  # the filter wants a uniform grid
+    return np.interp(t, grid, sosfiltfilt(sos, np.interp(grid, t, x)))
 
 
 def cut_windows(
     t: np.ndarray, x: np.ndarray, *, rate_hz: float, window: int, hop: int
 ) -> np.ndarray:
-    """Resample ``x(t)`` onto a uniform grid at ``rate_hz`` and cut windows, ``(k, window)``."""
-    n = int(np.floor((t[-1] - t[0]) * rate_hz)) + 1
-    grid = t[0] + np.arange(n) / rate_hz
-    xu = np.interp(grid, t, x)
-    starts = np.arange(0, n - window + 1, hop)
-    if starts.size == 0:
-        return np.zeros((0, window))
-    return np.stack([xu[s : s + window] for s in starts])
+    """The windows of :func:`windows_of`, shape ``(k, window)``."""
+    return windows_of(t, x, rate_hz=rate_hz, window=window, hop=hop)[0]
+
+
+def window_samples(window_s: float, hop_s: float | None, rate_hz: float) -> tuple[int, int]:
+    """Window and hop in samples, refused when a window is too short to mean anything."""
+    if not (np.isfinite(window_s) and window_s > 0):
+        raise ValueError(f"window {window_s!r} s must be a positive number of seconds")
+    if hop_s is not None and not (np.isfinite(hop_s) and hop_s > 0):
+        raise ValueError(f"hop {hop_s!r} s must be a positive number of seconds")
+    window = round(window_s * rate_hz)
+    if window < MIN_WINDOW:
+        raise ValueError(
+            f"a {window_s:g} s window holds {window} samples at {rate_hz:.4g} Hz (at least "
+            f"{MIN_WINDOW} needed): pass a longer window, and check that the time column "
+            "is in seconds"
+        )
+    hop = window if hop_s is None else round(hop_s * rate_hz)
+    if hop < 1:
+        raise ValueError(f"hop {hop_s:g} s is under one sample at {rate_hz:.4g} Hz")
+    return window, hop
 
 
 def recording_signal(rec: Recording, channel: str | None) -> np.ndarray:
@@ -139,21 +242,57 @@ def recording_signal(rec: Recording, channel: str | None) -> np.ndarray:
     return x
 
 
+def _visible(p: Path) -> bool:
+    """Not a hidden or system entry (``.ipynb_checkpoints``, macOS ``._x.csv`` and
+    ``__MACOSX``): those are never recordings or labels."""
+    return not p.name.startswith((".", "__"))
+
+
+def _is_recording(f: Path) -> bool:
+    return f.is_file() and _visible(f) and f.suffix.lower() in RECORDING_SUFFIXES
+
+
 def list_dataset(root: str | Path) -> dict[str, list[Path]]:
-    """``label → recording files`` of a dataset folder ``ROOT/<label>/<recording>``."""
+    """``label → recording files`` of a dataset folder ``ROOT/<label>/<recording>``.
+
+    Raises:
+        RecordingError: ``root`` is not a folder, holds no recordings, or has a label
+            folder without recordings (the class would silently vanish).
+    """
     root = Path(root)
     if not root.is_dir():
         raise RecordingError(
             f"{root}: not a dataset folder (expected ROOT/<label>/<recording>.csv)"
         )
-    out = {}
-    for d in sorted(p for p in root.iterdir() if p.is_dir()):
-        files = sorted(f for f in d.iterdir() if f.suffix.lower() in RECORDING_SUFFIXES)
+    out, empty = {}, []
+    for d in sorted(p for p in root.iterdir() if p.is_dir() and _visible(p)):
+        files = sorted(f for f in d.iterdir() if _is_recording(f))
         if files:
             out[d.name] = files
+        else:
+            empty.append(d.name)
     if not out:
         raise RecordingError(f"{root}: no recordings in ROOT/<label>/ folders")
+    if empty:
+        raise RecordingError(
+            f"{root}: label folder(s) {empty} hold no recordings "
+            f"({'/'.join(RECORDING_SUFFIXES)}): add recordings or move the folder(s) away"
+        )
     return out
+
+
+def _first_channel(recs: list[tuple[str, Recording]], root) -> str:
+    """The column every recording has first, refused when they disagree (a dataset whose
+    files list their axes in different orders would mix the axes)."""
+    firsts = {}
+    for _, rec in recs:
+        firsts.setdefault(next(iter(rec.columns), ""), str(rec.source))
+    if len(firsts) > 1:
+        seen = ", ".join(f"{c!r} in {Path(src).name}" for c, src in firsts.items())
+        raise RecordingError(
+            f"{root}: the recordings' first signal columns differ ({seen}): pass --channel"
+        )
+    return next(iter(firsts))
 
 
 def load_dataset(
@@ -172,7 +311,8 @@ def load_dataset(
         channel: Column to classify (the first signal column by default).
         window_s: Window length (s).
         hop_s: Step between windows (s); ``window_s`` (no overlap) by default.
-        rate_hz: Rate to resample to; the first recording's rate by default.
+        rate_hz: Rate to resample to (no recording may be slower); by default the
+            recordings' own rate, which must then agree within :data:`RATE_TOLERANCE`.
         labels: Class names in model order (a model's); the folder names by default.
     """
     files = list_dataset(root)
@@ -181,18 +321,22 @@ def load_dataset(
     if unknown:
         raise RecordingError(f"{root}: labels {unknown} are not among the classes {list(names)}")
     recs = [(lab, read_recording(f)) for lab in files for f in files[lab]]
-    rate = recording_rate(recs[0][1]) if rate_hz is None else float(rate_hz)
-    window = round(window_s * rate)
-    hop = window if hop_s is None else max(round(hop_s * rate), 1)
+    rate = _dataset_rate(recs, root) if rate_hz is None else float(rate_hz)
+    if not (np.isfinite(rate) and rate > 0):
+        raise ValueError(f"rate {rate_hz!r} Hz must be a positive number")
+    window, hop = window_samples(window_s, hop_s, rate)
+    channel = _first_channel(recs, root) if channel is None else channel
     chunks, ys, groups, speeds, sources, starts = [], [], [], [], [], []
     for i, (lab, rec) in enumerate(recs):
-        w = cut_windows(rec.t, recording_signal(rec, channel), rate_hz=rate, window=window, hop=hop)
+        check_rate(rec, rate)
+        w, st = windows_of(rec.t, recording_signal(rec, channel), rate_hz=rate, window=window,
+                           hop=hop)  # fmt: skip
         chunks.append(w)
         ys.append(np.full(len(w), names.index(lab)))
         groups.append(np.full(len(w), i))
         speeds.append(np.full(len(w), _speed(rec)))
         sources.append(str(rec.source))
-        starts.append(np.arange(len(w)) * hop / rate)
+        starts.append(st)
     ws = WindowSet(
         np.concatenate(chunks),
         np.concatenate(ys).astype(int),
@@ -202,17 +346,55 @@ def load_dataset(
         sources,
         rate,
         np.concatenate(starts),
+        channel,
     )
     if len(ws) == 0:
         raise RecordingError(f"{root}: recordings are shorter than one window ({window_s} s)")
     return ws
 
 
+def _dataset_rate(recs: list[tuple[str, Recording]], root) -> float:
+    """The recordings' common rate (the first one's), refused when they differ: windows
+    of one length in samples would then span different times and bands."""
+    rates = np.array([recording_rate(rec) for _, rec in recs])
+    lo, hi = int(np.argmin(rates)), int(np.argmax(rates))
+    if rates[hi] > rates[lo] * (1 + RATE_TOLERANCE):
+        raise RecordingError(
+            f"{root}: recordings are sampled at {rates[lo]:.4g} Hz "
+            f"({Path(str(recs[lo][1].source)).name}) to {rates[hi]:.4g} Hz "
+            f"({Path(str(recs[hi][1].source)).name}): pass --rate (at most {rates[lo]:.4g}) "
+            "to resample them all to one rate"
+        )
+    return float(rates[0])
+
+
+def check_speed(speed) -> None:
+    """Refuse speeds that are not positive and finite (m/s): the speed-normalised features
+    divide by them."""
+    v = np.asarray(speed, dtype=float)
+    if not (np.isfinite(v).all() and (v > 0).all()):
+        bad = v[~(np.isfinite(v) & (v > 0))].ravel()[0]
+        raise ValueError(f"speed {bad:g} m/s: the robot speed must be a positive number")
+
+
 def _speed(rec: Recording) -> float:
-    try:
-        return float(rec.meta.get("speed_mps", "nan"))
-    except ValueError:
+    """``speed_mps`` (m/s) from the metadata; NaN when absent.
+
+    Raises:
+        RecordingError: present but not a positive finite number.
+    """
+    if "speed_mps" not in rec.meta:
         return float("nan")
+    try:
+        v = float(rec.meta["speed_mps"])
+    except ValueError:
+        v = float("nan")
+    if not (np.isfinite(v) and v > 0):
+        raise RecordingError(
+            f"{rec.source or 'recording'}: speed_mps {rec.meta['speed_mps']!r} is not a "
+            "positive number of metres per second"
+        )
+    return v
 
 
 # --------------------------------------------------------------------------- splits
@@ -418,7 +600,10 @@ class ClassifierModel:
             if self.needs_speed:
                 raise ValueError("this model needs the robot speed (m/s) of each window")
             return jnp.full(n, jnp.nan)
-        return jnp.broadcast_to(jnp.asarray(speeds, dtype=float), (n,))
+        speeds = np.broadcast_to(np.asarray(speeds, dtype=float), (n,))
+        if self.needs_speed:
+            check_speed(speeds)
+        return jnp.asarray(speeds)
 
     def predict_proba(self, windows, speeds=None) -> np.ndarray:
         """Class probabilities, shape ``(n, classes)``, for windows ``(n, window)``."""
@@ -456,6 +641,8 @@ class ClassifierModel:
             )
         if speed is None and self.needs_speed:
             raise ValueError("this model needs the robot speed (m/s) of each window")
+        if self.needs_speed:
+            check_speed(speed)
         v = np.float64(np.nan if speed is None else speed)
         return np.asarray(self._one(*self._one_args, x, v))
 
@@ -467,8 +654,15 @@ class ClassifierModel:
         """
         if self.spec.channels != 1:
             raise ValueError("classify_recording reads one channel; this model takes several")
-        x = recording_signal(rec, self.channel if self.channel in rec.columns else None)
-        w = cut_windows(rec.t, x, rate_hz=self.rate_hz, window=self.window, hop=self.hop)
+        if self.channel is not None and self.channel not in rec.columns:
+            raise RecordingError(
+                f"{rec.source or 'recording'}: no column {self.channel!r}, the one the model "
+                f"was trained on (columns: {list(rec.columns)}): rename the column, or "
+                "train a model on one of these"
+            )
+        x = recording_signal(rec, self.channel)
+        check_rate(rec, self.rate_hz)
+        w, starts = windows_of(rec.t, x, rate_hz=self.rate_hz, window=self.window, hop=self.hop)
         if len(w) == 0:
             raise RecordingError(
                 f"{rec.source}: shorter than one window ({self.window / self.rate_hz:g} s)"
@@ -481,7 +675,6 @@ class ClassifierModel:
                     "to the recording or pass --speed"
                 )
         p = self.predict_proba(w, None if speed is None else np.full(len(w), speed))
-        starts = np.arange(len(w)) * self.hop / self.rate_hz
         fused = self.fuse(p, np.zeros(len(w), int), starts)
         own, idx = np.argmax(p, axis=1), np.argmax(fused, axis=1)
         mean = p.mean(axis=0)
@@ -556,6 +749,10 @@ class ClassifierModel:
             std = np.asarray(head["normalisation"]["std"], dtype=float)
             sizes = [int(s) for s in head["network"]["sizes"]]
             hop = int(head["hop"])
+            if hop < 1:
+                raise ValueError(f"hop {hop} < 1")
+            if len(set(labels)) != len(labels):
+                raise ValueError(f"repeated labels {labels}")
             context_s = float(head.get("context_s", spec.window / spec.rate_hz))
             if not np.isfinite(context_s):
                 raise ValueError(f"context_s {context_s}")
@@ -583,7 +780,7 @@ class ClassifierModel:
                 nets.append(from_arrays(mine, sizes))
         except FileNotFoundError:
             raise ModelError(f"{weights}: missing model weights") from None
-        except (ValueError, OSError, EOFError) as err:
+        except (ValueError, OSError, EOFError, zipfile.BadZipFile) as err:
             raise ModelError(f"{weights}: corrupt model weights ({err})") from None
         try:
             return cls(spec, labels, mean, std, nets, hop=hop, channel=head.get("channel"),
@@ -632,6 +829,8 @@ def features_of(ws: WindowSet, spec: FeatureSpec) -> np.ndarray:
 def check_context(context_s: float, window_s: float) -> float:
     """``context_s`` as a float, refused (ValueError) when shorter than one window."""
     context_s = float(context_s)
+    if not np.isfinite(context_s):
+        raise ValueError(f"context {context_s:g} s: pass a finite number of seconds")
     if not context_s >= window_s - 1e-9:
         raise ValueError(
             f"context {context_s:g} s is shorter than one window ({window_s:g} s): pass at "
@@ -686,6 +885,24 @@ def fit_on_features(
                            info=info, context_s=context_s)  # fmt: skip
 
 
+def check_classes(ws: WindowSet) -> None:
+    """Refuse training data with fewer than two classes or a class without windows (its
+    recordings all shorter than one window): a model would learn nothing of it, yet name
+    it as a class."""
+    counts = np.bincount(ws.labels, minlength=len(ws.label_names))
+    if len(ws.label_names) < 2:
+        raise ValueError(
+            f"a classifier needs at least two terrains; the data have only {list(ws.label_names)}"
+        )
+    empty = [lab for lab, c in zip(ws.label_names, counts, strict=True) if c == 0]
+    if empty:
+        window_s = ws.windows.shape[-1] / ws.rate_hz
+        raise ValueError(
+            f"no windows of {empty}: their recordings are shorter than one window "
+            f"({window_s:g} s); record longer or pass a shorter window"
+        )
+
+
 def train_classifier(
     ws: WindowSet,
     *,
@@ -704,18 +921,20 @@ def train_classifier(
         features: ``fitted`` (ours) or ``paper`` (standardise + |FFT|, the paper's network).
         config: Network and training settings; the paper's preset sizes for ``paper``.
         use_speed: Speed-normalised features; by default when every recording has a speed.
-        channel: Recorded column the model classifies (kept in the model file).
+        channel: Recorded column the model classifies (kept in the model file); the
+            window set's own by default.
         hop: Window step for whole recordings (samples); the window length by default.
         context_s: Signal each label rests on (s), fused over consecutive windows
             (:func:`fuse_context`); :func:`default_context_s` by default.
     """
     if config is None:
         config = default_config(features)
+    check_classes(ws)
     spec = default_spec(ws, features, use_speed=use_speed)
     if context_s is None:
         context_s = default_context_s(features, spec.window / spec.rate_hz)
     model = fit_on_features(features_of(ws, spec), ws, spec, config, context_s=context_s)
-    model.channel = channel
+    model.channel = ws.channel if channel is None else channel
     if hop is not None:
         model.hop = int(hop)
     return model
@@ -730,12 +949,16 @@ def confusion_matrix(y_true, y_pred, n_classes: int) -> np.ndarray:
 
 
 def scores(conf: np.ndarray, labels) -> dict:
-    """Accuracy, per-class accuracy (recall) and the confusion matrix as a JSON-able dict."""
-    total = conf.sum()
-    per = conf.diagonal() / np.maximum(conf.sum(axis=1), 1)
+    """Accuracy, per-class accuracy (recall; None for a class without windows) and the
+    confusion matrix as a JSON-able dict."""
+    total, rows = conf.sum(), conf.sum(axis=1)
+    per = conf.diagonal() / np.maximum(rows, 1)
     return {
         "accuracy": float(conf.trace() / max(total, 1)),
-        "per_class": {lab: round(float(a), 4) for lab, a in zip(labels, per, strict=True)},
+        "per_class": {
+            lab: round(float(a), 4) if n else None  # None: no windows of it
+            for lab, a, n in zip(labels, per, rows, strict=True)
+        },
         "confusion": conf.tolist(),
         "labels": list(labels),
         "n_windows": int(total),
@@ -882,6 +1105,7 @@ def cross_validate(
         ``accuracy_per_window``, ``context_s``, ``folds``, ``accuracy_by_fold`` (fused
         labels) and ``per_recording`` (source and label → fused accuracy).
     """
+    check_classes(ws)
     fold = recording_folds(ws, folds, seed)
     config = default_config(features) if config is None else config
     spec = default_spec(ws, features, use_speed=use_speed)

@@ -168,6 +168,8 @@ def _cmd_train(args) -> dict:
             raise CommandError("--max-epochs must be at least 1")
         config = replace(config, max_epochs=args.max_epochs)
     if args.hidden:
+        if min(args.hidden) < 1:
+            raise CommandError(f"--hidden sizes must be at least 1, not {args.hidden}")
         config = replace(config, hidden=tuple(args.hidden))
     if args.ensemble is not None:
         if args.ensemble < 1:
@@ -178,8 +180,10 @@ def _cmd_train(args) -> dict:
     for name in ("weight_decay", "input_noise"):
         value = getattr(args, name)
         if value is not None:
-            if not value >= 0:
-                raise CommandError(f"--{name.replace('_', '-')} must be at least 0, not {value:g}")
+            if not 0 <= value < float("inf"):
+                raise CommandError(
+                    f"--{name.replace('_', '-')} must be a finite number at least 0, not {value:g}"
+                )
             config = replace(config, **{name: value})
     ws = load_dataset(args.dataset, channel=args.channel, window_s=args.window,
                       hop_s=args.hop, rate_hz=args.rate)  # fmt: skip

@@ -293,7 +293,7 @@ def fitted_features(
     time_feats = [
         log_rms,
         jnp.mean(z**3),
-        jnp.log(jnp.mean(z**4)),
+        jnp.log(jnp.mean(z**4) + _EPS),  # a flat-lined sensor: z = 0
         jnp.log(jnp.max(jnp.abs(z)) + _EPS),
         jnp.mean(jnp.signbit(z[1:]) != jnp.signbit(z[:-1])),
         jnp.std(jnp.diff(z)),
@@ -379,7 +379,8 @@ def fitted_features(
         s_bands = jnp.log(band_energies(freqs / v, power, s_edges) + 1e-4)
         parts.append(s_bands)
         parts.append(jnp.stack([jnp.log(jnp.maximum(pf[0], df) / v),
-                                jnp.log(centroid / v), log_rms - 2 * jnp.log(v),
+                                jnp.log(jnp.maximum(centroid, df) / v),
+                                log_rms - 2 * jnp.log(v),
                                 b_level - 2 * jnp.log(v)]))  # fmt: skip
     return jnp.concatenate(parts)
 
