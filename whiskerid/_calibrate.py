@@ -185,25 +185,23 @@ class StaticTest:
 
 def read_static_test(path: str | Path) -> StaticTest:
     """Read a static test CSV with columns ``force_n`` and ``deflection_m`` (optional ``x_m``)."""
-    from ._io import read_recording
+    from ._io import read_csv_table
 
     path = Path(path)
     if not path.exists():
         raise RecordingError(f"{path}: no such static-test file")
-    text = path.read_text().splitlines()
-    header_i = next((i for i, ln in enumerate(text) if ln.strip() and not ln.startswith("#")), None)
-    if header_i is None:
-        raise RecordingError(f"{path}: empty static-test file")
-    header = [h.strip() for h in text[header_i].split(",")]
+    table = read_csv_table(path)
     need = ("force_n", "deflection_m")
-    missing = [c for c in need if c not in header]
+    missing = [c for c in need if c not in table.header]
     if missing:
-        raise RecordingError(f"{path}: static test needs columns {list(need)}; header is {header}")
-    rec = read_recording(path, time_col="force_n")
-    x = rec.columns.get("x_m")
+        raise RecordingError(
+            f"{path}: static test needs columns {list(need)}; header is {table.header}"
+        )
+    col = {h: table.data[:, j] for j, h in enumerate(table.header)}
+    x = col.get("x_m")
     return StaticTest(
-        force_n=rec.t,
-        deflection_m=rec.signal("deflection_m"),
+        force_n=col["force_n"],
+        deflection_m=col["deflection_m"],
         x_m=None if x is None else float(x[0]),
         source=str(path),
     )
@@ -463,7 +461,8 @@ class Calibration:
     """Outcome of :func:`calibrate`.
 
     Attributes:
-        status: ``"ok"`` or why not (``"not converged"``, ``"non-finite"``).
+        status: ``"ok"`` or why not (``"not converged"``, ``"non-finite"``, or ``"poor fit"``
+            when the model explains little of a recording: see ``warnings``).
         ok: Whether the solver reported success and the covariance is finite.
         params: Reported parameters, name → ``{"value", "std", "source"}`` (``source`` is
             ``"fit"`` or ``"derived"``, the latter with the pin it used).
@@ -475,6 +474,7 @@ class Calibration:
         record: The input record with the fitted values written in, and a ``[fit]`` table.
         solver: Solver name.
         curves: Per recording ``(t, y, model)`` in observed units (for plots).
+        warnings: What the user should check (one sentence each), e.g. a poor fit.
     """
 
     status: str
@@ -490,6 +490,7 @@ class Calibration:
     curves: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = field(
         repr=False, default_factory=list
     )
+    warnings: list[str] = field(default_factory=list)
 
     def to_json(self) -> dict:
         """The JSON summary (``whiskerid calibrate --json``)."""
@@ -504,6 +505,7 @@ class Calibration:
             "correlations": self.correlations,
             "diagnostics": self.diagnostics,
             "recordings": self.per_recording,
+            "warnings": self.warnings,
         }
 
 
@@ -581,6 +583,9 @@ def calibrate(
         "lag1_autocorr": [r["lag1_autocorr"] for r in per_rec],
         "weighted_rms": float(np.sqrt(np.mean(resid**2))),
     }
+    warnings = _poor_fit_warnings(per_rec)
+    if ok and warnings:
+        status = "poor fit"
     out = Calibration(
         status=status,
         ok=ok,
@@ -593,6 +598,7 @@ def calibrate(
         record=record,
         solver=solver,
         curves=curves,
+        warnings=warnings,
     )
     out.record = _updated_record(record, out, pin, static, obs, problem)
     return out
@@ -946,6 +952,22 @@ def _report(record, problem, unravel, flat, cov, pin, static, nominal):
     return params, correlations, fixed, note
 
 
+#: A recording fitted below this SNR (signal RMS over residual RMS, in dB) is a poor fit:
+#: the model explains less than half of the signal's variance.
+POOR_FIT_SNR_DB = 3.0
+
+
+def _poor_fit_warnings(per_rec: list[dict]) -> list[str]:
+    """A warning per recording that the fitted model leaves mostly unexplained."""
+    return [
+        f"poor fit of {r['name']}: the model explains little of the signal (SNR "
+        f"{r['snr_db']:.3g} dB); check the time units (seconds), the observable and the "
+        "excitation"
+        for r in per_rec
+        if not r["snr_db"] >= POOR_FIT_SNR_DB
+    ]
+
+
 def _per_recording(problem, unravel, flat, args, obs):
     theta = unravel(flat)
     w = _whisker(problem, theta)
@@ -1038,6 +1060,8 @@ def _updated_record(record, cal: Calibration, pin, static, obs, problem):
         "whiskerid_version": __version__,
         "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
     }
+    if cal.warnings:
+        fit["warnings"] = list(cal.warnings)
     extra = dict(record.extra)
     extra["fit"] = fit
     desc = record.description

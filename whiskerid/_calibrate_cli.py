@@ -16,7 +16,7 @@ from ._calibrate import (
     read_static_test,
     release_time,
 )
-from ._io import RecordingError, read_recording
+from ._io import RecordingError, check_out_path, read_recording
 from ._lsq import SOLVERS
 from ._record import load_record
 
@@ -97,6 +97,25 @@ def add_data_options(p: argparse.ArgumentParser) -> None:
         help="use samples from this time (s); decay: the release is detected by default",
     )
     p.add_argument("--t-end", type=float, help="use samples up to this time (s)")
+
+
+def check_data_options(args) -> None:
+    """Refuse NaN, infinities and impossible values in the numbers of :func:`add_data_options`.
+
+    Raises:
+        ValueError: Which option is wrong and what it must be.
+    """
+    for flag, value in (("--sensor-x", args.sensor_x), ("--t-start", args.t_start),
+                        ("--t-end", args.t_end)):  # fmt: skip
+        if value is not None and not np.isfinite(value):
+            raise ValueError(f"{flag} {value!r} must be a finite number")
+    if not np.isfinite(args.scale) or args.scale == 0:
+        raise ValueError(f"--scale {args.scale!r} must be a finite, non-zero number")
+    for flag, value in (("--fb", args.fb), ("--hb", args.hb)):
+        if value is not None and not (np.isfinite(value) and value > 0):
+            raise ValueError(f"{flag} {value!r} must be a positive number")
+    if None not in (args.t_start, args.t_end) and args.t_end <= args.t_start:
+        raise ValueError(f"--t-end {args.t_end:g} must be later than --t-start {args.t_start:g}")
 
 
 def _observable(args, rec, col: str) -> str:
@@ -198,8 +217,11 @@ def _meta_float(rec, key):
 def _cmd_calibrate(args, command_error) -> dict:
     import sys
 
-    if args.out.exists() and args.out.is_dir():
-        raise command_error(f"--out {args.out} is a folder; give a TOML file")
+    inputs = {"REC": args.recordings, "--whisker": args.whisker, "--static": args.static}
+    check_out_path(args.out, "--out", inputs=inputs)
+    if args.plot is not None:
+        check_out_path(args.plot, "--plot", inputs={**inputs, "--out": args.out})
+    check_data_options(args)
     record = load_record(args.whisker)
     obs = [load_observation(p, record, args) for p in args.recordings]
     static = read_static_test(args.static) if args.static else None
@@ -233,4 +255,6 @@ def _cmd_calibrate(args, command_error) -> dict:
         print(f"wrote {args.plot}", file=sys.stderr)
     if not cal.ok:
         print("warning: the fit did not converge; the record holds its status", file=sys.stderr)
+    for warning in cal.warnings:
+        print(f"warning: {warning}", file=sys.stderr)
     return out

@@ -158,10 +158,11 @@ def check_rate(rec: Recording, rate_hz: float) -> float:
     band and a model would read it as a terrain)."""
     own = recording_rate(rec)
     if own < rate_hz * (1 - RATE_TOLERANCE):
+        hint = " (is the time column in seconds?)" if own < rate_hz / 50 else ""
         raise RecordingError(
-            f"{rec.source or 'recording'}: sampled at {own:.4g} Hz, below the {rate_hz:g} Hz "
-            f"needed: record at {rate_hz:g} Hz or more, or use a model (train --rate) at "
-            f"{own:.4g} Hz"
+            f"{rec.source or 'recording'}: sampled at {own:.4g} Hz{hint}, below the "
+            f"{rate_hz:g} Hz needed: record at {rate_hz:g} Hz or more, or use a model "
+            f"(train --rate) at {own:.4g} Hz"
         )
     return own
 

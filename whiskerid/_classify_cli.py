@@ -82,7 +82,10 @@ def add_classify_commands(sub, command_error) -> None:
     t.add_argument("--no-speed", action="store_true", help="do not use speed_mps metadata")
     t.add_argument("--hidden", type=int, nargs="+", help="hidden layer sizes")
     t.add_argument(
-        "--max-epochs", type=int, help="epoch limit (1500 for fitted, 300 for paper by default)"
+        "--max-epochs",
+        type=int,
+        help="epoch limit, rounded up to whole chunks of 20 (fitted) or 10 (paper) epochs "
+        "between stopping checks (1500 for fitted, 300 for paper by default)",
     )
     t.add_argument("--ensemble", type=int, help="networks averaged (1 by default)")
     t.add_argument(

@@ -6,18 +6,31 @@ goes to stderr; the exit status is 0 on success and 2 with a one-line reason on 
 
 import argparse
 import json
+import math
 import sys
 import time
+import zipfile
 from pathlib import Path
 
 import numpy as np
 
 from . import __version__
-from ._io import RecordingError, read_recording, write_csv
+from ._io import RecordingError, check_out_path, read_recording, write_csv
 from ._record import RecordError, load_record, paper_record
 from ._simulate import EXCITATIONS, MODELS, SIM_OBSERVABLES, UNITS, BaseMotion, simulate
 
-_EXPECTED = (ValueError, RecordError, RecordingError, OSError, RuntimeError)
+# Reported on one line with exit status 2. The readers turn corrupt archives into
+# RecordingErrors with the path; BadZipFile, EOFError and MemoryError are a safety net.
+_EXPECTED = (
+    ValueError,
+    RecordError,
+    RecordingError,
+    OSError,
+    RuntimeError,
+    zipfile.BadZipFile,
+    EOFError,
+    MemoryError,
+)
 
 
 class CommandError(Exception):
@@ -108,6 +121,10 @@ def _record_or_paper(path: Path | None):
 
 
 def _cmd_simulate(args) -> dict:
+    inputs = {"--whisker": args.whisker, "--base": args.base}
+    check_out_path(args.out, "--out", inputs=inputs)
+    if args.plot is not None:
+        check_out_path(args.plot, "--plot", inputs={**inputs, "--out": args.out})
     record = _record_or_paper(args.whisker)
     base = None
     if args.excitation == "base":
@@ -248,8 +265,28 @@ def main(argv: list[str] | None = None) -> int:
             **result,
             "elapsed_s": round(time.perf_counter() - start, 3),
         }
-        print(json.dumps(result, indent=2))
+        print(json.dumps(json_safe(result), indent=2, allow_nan=False))
     return 0
+
+
+def json_safe(value):
+    """``value`` with every non-finite float (NaN, ±inf, NumPy's too) replaced by None.
+
+    Standard JSON has no NaN or Infinity; ``null`` is what other tools can read.
+    """
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [json_safe(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return json_safe(value.tolist())
+    if isinstance(value, Path):
+        return str(value)
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
 
 
 def _one_line(err: BaseException) -> str:

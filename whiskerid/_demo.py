@@ -238,7 +238,10 @@ def _classification_stage(out: Path, *, plots: bool, say) -> dict:
     say("[6] terrain classification: 7 simulated terrains at 0.2 m/s, 16 runs x 6 s each")
     # Many short runs rather than a few long ones: what the network needs to see is the
     # run-to-run variation of each terrain (6 runs: 0.68 on held-out runs, 16: 0.94).
-    synthesize_dataset(out / "terrain", speeds=(0.2,), runs=16, duration_s=6.0, seed=0)
+    # A re-run into the same --out replaces the demo's own recordings (and nothing else).
+    synthesize_dataset(
+        out / "terrain", speeds=(0.2,), runs=16, duration_s=6.0, seed=0, replace_synthetic=True
+    )
     train, test = split_by_recording(load_dataset(out / "terrain"), 0.34, seed=0)
     model = train_classifier(train)
     model.save(out / "terrain-model")

@@ -15,6 +15,8 @@ array of time and one signal (the layout of the cantilever recordings in ``share
 
 import csv
 import io
+import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -44,6 +46,8 @@ class Recording:
     def signal(self, name: str | None = None) -> np.ndarray:
         """The named column, or the only/first one when ``name`` is None."""
         if name is None:
+            if not self.columns:
+                raise RecordingError(f"{self.source or 'recording'}: no signal column")
             return next(iter(self.columns.values()))
         if name not in self.columns:
             raise RecordingError(
@@ -81,11 +85,14 @@ def read_recording(path: str | Path, *, time_col: str = "t") -> Recording:
     """Read a CSV, NPZ or NPY recording.
 
     Raises:
-        RecordingError: Missing file, unknown format, no time column, unparsable numbers.
+        RecordingError: Missing file, unknown format, no time or signal column, unparsable
+            numbers (the message names the file, line and column), a corrupt NumPy file.
     """
     path = Path(path)
     if not path.exists():
         raise RecordingError(f"{path}: no such file")
+    if path.is_dir():
+        raise RecordingError(f"{path}: is a folder, not a recording file")
     readers = {".csv": _read_csv, ".npz": _read_npz, ".npy": _read_npy}
     reader = readers.get(path.suffix.lower())
     if reader is None:
@@ -93,54 +100,261 @@ def read_recording(path: str | Path, *, time_col: str = "t") -> Recording:
             f"{path}: unknown recording format {path.suffix!r}; use .csv, .npz or .npy"
         )
     rec = reader(path, time_col)
+    if not rec.columns:
+        raise RecordingError(
+            f"{path}: no signal column, only the time column {time_col!r}; "
+            "a recording needs time and at least one signal"
+        )
     rec.source = str(path)
     return rec
 
 
-def _read_csv(path: Path, time_col: str) -> Recording:
-    meta: dict[str, str] = {}
-    lines = path.read_text().splitlines()
-    body_start = 0
-    for i, line in enumerate(lines):
-        if not line.startswith("#"):
-            body_start = i
-            break
-        key, _, value = line[1:].partition(":")
-        meta[key.strip()] = value.strip()
-    else:
+@dataclass
+class CsvTable:
+    """A numeric CSV table as read by :func:`read_csv_table`.
+
+    Attributes:
+        header: Column names (whitespace-stripped, unique).
+        data: Values, shape ``(rows, len(header))``.
+        meta: The leading ``# key: value`` lines.
+    """
+
+    header: list[str]
+    data: np.ndarray
+    meta: dict[str, str]
+
+
+def read_csv_table(path: str | Path) -> CsvTable:
+    """Read a numeric CSV: ``# key: value`` lines, a header row, then numbers.
+
+    Accepts a UTF-8 byte-order mark, CRLF line ends, blank lines, and comma, tab or
+    semicolon delimiters (detected from the header row).
+
+    Raises:
+        RecordingError: Not UTF-8, no header, empty or duplicate column names, a comment
+            line inside the data, a row of the wrong length or a cell that is not a number
+            (named by line and column).
+    """
+    path = Path(path)
+    lines = _decode(path).splitlines()
+    meta, at = _metadata(lines)
+    if at is None:
         raise RecordingError(f"{path}: no header row")
-    rows = list(csv.reader(lines[body_start:]))
-    header = [h.strip() for h in rows[0]]
-    if time_col not in header:
-        raise RecordingError(f"{path}: no time column {time_col!r}; header is {header}")
+    delimiter = _delimiter(lines[at])
+    header = [h.strip() for h in _split(lines[at], delimiter)]
+    _check_header(path, header, at + 1)
+    rows, numbers = [], []
+    for i in range(at + 1, len(lines)):
+        line = lines[i]
+        if not line.strip():
+            continue
+        if line.lstrip().startswith("#"):
+            raise RecordingError(
+                f"{path} line {i + 1}: a comment line inside the data ({line.strip()[:40]!r}); "
+                "remove it (metadata lines go above the header)"
+            )
+        cells = [c.strip() for c in _split(line, delimiter)]
+        if len(cells) != len(header):
+            raise RecordingError(_ragged(path, i + 1, cells, header))
+        rows.append(cells)
+        numbers.append(i + 1)
+    if not rows:
+        raise RecordingError(f"{path}: no data rows after the header")
     try:
-        data = np.array([[float(v) for v in r] for r in rows[1:] if r], dtype=float)
-    except ValueError as err:
-        raise RecordingError(f"{path}: a value is not a number ({err})") from None
-    if data.ndim != 2 or data.shape[0] == 0 or data.shape[1] != len(header):
-        raise RecordingError(f"{path}: no data rows, or rows of unequal length")
-    cols = {h: data[:, j] for j, h in enumerate(header)}
+        data = np.array(rows, dtype=float)
+    except ValueError:
+        raise RecordingError(_first_bad_cell(path, rows, numbers, header)) from None
+    return CsvTable(header=header, data=data, meta=meta)
+
+
+def _decode(path: Path) -> str:
+    raw = path.read_bytes()
+    try:
+        # utf-8-sig drops the byte-order mark that spreadsheet programs put in front.
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        line = raw[: err.start].count(b"\n") + 1
+        raise RecordingError(
+            f"{path} line {line}: not UTF-8 text (byte 0x{raw[err.start]:02x}); "
+            "save the file as UTF-8"
+        ) from None
+
+
+def _metadata(lines: list[str]) -> tuple[dict[str, str], int | None]:
+    """The leading ``# key: value`` lines (blank lines skipped) and the header's index."""
+    meta: dict[str, str] = {}
+    for i, line in enumerate(lines):
+        text = line.strip()
+        if not text:
+            continue
+        if not text.startswith("#"):
+            return meta, i
+        key, colon, value = text[1:].partition(":")
+        if colon:  # a '#' line without a colon is a comment, not metadata
+            meta[key.strip()] = value.strip()
+    return meta, None
+
+
+def _delimiter(header: str) -> str:
+    """Comma, tab or semicolon: whichever the header row holds most of (comma on a tie)."""
+    return max((",", "\t", ";"), key=header.count)
+
+
+def _split(line: str, delimiter: str) -> list[str]:
+    if '"' not in line:
+        return line.split(delimiter)
+    return next(csv.reader([line], delimiter=delimiter))
+
+
+def _check_header(path: Path, header: list[str], line: int) -> None:
+    for j, name in enumerate(header):
+        if not name:
+            hint = "; remove the trailing delimiter" if j == len(header) - 1 else ""
+            raise RecordingError(f"{path} line {line}: column {j + 1} has no name{hint}")
+    dups = sorted({h for h in header if header.count(h) > 1})
+    if dups:
+        raise RecordingError(
+            f"{path} line {line}: column name(s) {dups} appear more than once; "
+            "give every column its own name"
+        )
+
+
+def _ragged(path: Path, line: int, cells: list[str], header: list[str]) -> str:
+    hint = " (a trailing delimiter?)" if len(cells) == len(header) + 1 and not cells[-1] else ""
+    return (
+        f"{path} line {line}: {len(cells)} value(s) but the header has {len(header)} "
+        f"column(s) {header}{hint}; every row needs one value per column"
+    )
+
+
+def _first_bad_cell(path: Path, rows: list[list[str]], numbers: list[int], header) -> str:
+    for cells, line in zip(rows, numbers, strict=True):
+        for name, cell in zip(header, cells, strict=True):
+            try:
+                float(cell)
+            except ValueError:
+                return _bad_cell(path, line, name, cell)
+    return f"{path}: a value is not a number"
+
+
+def _bad_cell(path: Path, line: int, column: str, cell: str) -> str:
+    where = f"{path} line {line}, column {column!r}: {cell!r} is not a number"
+    try:
+        float(cell.replace(",", "."))
+    except ValueError:
+        what = "fill in the value or remove the row" if not cell else "use plain numbers"
+        return f"{where}; {what}"
+    return f"{where}; use a decimal point, not a comma"
+
+
+def _read_csv(path: Path, time_col: str) -> Recording:
+    table = read_csv_table(path)
+    if time_col not in table.header:
+        raise RecordingError(f"{path}: no time column {time_col!r}; header is {table.header}")
+    cols = {h: table.data[:, j] for j, h in enumerate(table.header)}
     t = cols.pop(time_col)
-    return Recording(t=t, columns=cols, meta=meta)
+    return Recording(t=t, columns=cols, meta=table.meta)
+
+
+# What a corrupt, truncated or non-array NumPy file raises inside np.load.
+_NUMPY_LOAD_ERRORS = (ValueError, OSError, EOFError, KeyError, zipfile.BadZipFile, zlib.error)
+
+
+def _not_numpy(path: Path, err: Exception) -> RecordingError:
+    kind = ".npz archive" if path.suffix.lower() == ".npz" else ".npy array file"
+    return RecordingError(
+        f"{path}: not a valid NumPy {kind} (truncated, corrupt, or holding Python objects "
+        f"rather than numbers: {type(err).__name__}); save numeric arrays with numpy.save "
+        "or numpy.savez"
+    )
 
 
 def _read_npz(path: Path, time_col: str) -> Recording:
-    with np.load(path, allow_pickle=False) as z:
-        if time_col not in z:
-            raise RecordingError(f"{path}: no array {time_col!r}; arrays are {list(z)}")
-        meta = {k[5:]: str(z[k]) for k in z if k.startswith("meta_")}
-        cols = {k: np.asarray(z[k]) for k in z if k != time_col and not k.startswith("meta_")}
-        return Recording(t=np.asarray(z[time_col], dtype=float), columns=cols, meta=meta)
+    try:
+        # Our own file handle: np.load leaks its own when the archive is corrupt.
+        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
+            arrays = {k: np.asarray(z[k]) for k in z.files}
+    except _NUMPY_LOAD_ERRORS as err:
+        raise _not_numpy(path, err) from None
+    if time_col not in arrays:
+        raise RecordingError(f"{path}: no array {time_col!r}; arrays are {list(arrays)}")
+    t = _numeric(path, time_col, arrays.pop(time_col)).astype(float)
+    meta = {k[5:]: str(v) for k, v in arrays.items() if k.startswith("meta_")}
+    cols = {k: _numeric(path, k, v) for k, v in arrays.items() if not k.startswith("meta_")}
+    for name, col in cols.items():
+        if col.shape != t.shape or t.ndim != 1:
+            raise RecordingError(
+                f"{path}: array {name!r} has shape {col.shape} but {time_col!r} has "
+                f"{t.shape}; each signal must be 1-D and as long as the time array"
+            )
+    return Recording(t=t, columns=cols, meta=meta)
+
+
+def _numeric(path: Path, name: str, arr: np.ndarray) -> np.ndarray:
+    if not (np.issubdtype(arr.dtype, np.number) or arr.dtype == bool):
+        raise RecordingError(f"{path}: array {name!r} holds {arr.dtype} values, not numbers")
+    return arr
 
 
 def _read_npy(path: Path, time_col: str) -> Recording:
-    arr = np.load(path, allow_pickle=False)
+    try:
+        with open(path, "rb") as fh:
+            arr = np.load(fh, allow_pickle=False)
+            if not isinstance(arr, np.ndarray):  # an .npz archive named .npy
+                arr.close()
+    except _NUMPY_LOAD_ERRORS as err:
+        raise _not_numpy(path, err) from None
+    if not isinstance(arr, np.ndarray):
+        raise RecordingError(f"{path}: an .npz archive named .npy; rename it to .npz")
+    arr = _numeric(path, "(the array)", arr)
     if arr.ndim != 2 or 2 not in arr.shape:
         raise RecordingError(
             f"{path}: expected a (2, N) array of time and signal, got shape {arr.shape}"
         )
     arr = arr if arr.shape[0] == 2 else arr.T
     return Recording(t=arr[0].astype(float), columns={"signal": arr[1].astype(float)})
+
+
+def same_file(a: str | Path, b: str | Path) -> bool:
+    """Whether two paths name the same file (also through links, or when not yet there)."""
+    a, b = Path(a), Path(b)
+    try:
+        if a.exists() and b.exists():
+            return a.samefile(b)
+    except OSError:
+        pass
+    return a.resolve() == b.resolve()
+
+
+def check_out_path(path: Path, flag: str, *, inputs: dict[str, Path | list | None]) -> None:
+    """Refuse an output file that is one of the inputs, a folder, or under a file.
+
+    Checked before any work, so that a bad ``--out`` neither destroys an input nor wastes
+    a long computation.
+
+    Args:
+        path: The file to write.
+        flag: Its option name, for the message (``--out``).
+        inputs: Option name → input path(s) (None for an option not given).
+
+    Raises:
+        ValueError: What is wrong, on one line.
+    """
+    path = Path(path)
+    for name, given in inputs.items():
+        for p in given if isinstance(given, list | tuple) else [given]:
+            if p is not None and same_file(path, p):
+                raise ValueError(
+                    f"{flag} {path} is also the input {name} {p}; writing it would destroy "
+                    "the input: give another file name"
+                )
+    if path.is_dir():
+        raise ValueError(f"{flag} {path} is a folder; give a file name")
+    for parent in path.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise ValueError(f"{flag} {path}: {parent} is a file, not a folder")
+            break
 
 
 def check_samples(t: np.ndarray, x: np.ndarray, *, where: str = "recording", min_samples: int = 8):
@@ -164,5 +378,5 @@ def check_samples(t: np.ndarray, x: np.ndarray, *, where: str = "recording", min
         kind = "duplicate" if steps[bad[0]] == 0 else "decreasing"
         raise RecordingError(
             f"{where}: {kind} timestamp at row {bad[0] + 1} "
-            f"(t = {t[bad[0] + 1]!r}); timestamps must increase"
+            f"(t = {float(t[bad[0] + 1])!r}); timestamps must increase"
         )

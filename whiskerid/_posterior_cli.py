@@ -4,8 +4,11 @@ import argparse
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from ._calibrate import PINS, read_static_test
-from ._calibrate_cli import add_data_options, load_observation
+from ._calibrate_cli import add_data_options, check_data_options, load_observation
+from ._io import same_file
 from ._posterior import LIKELIHOODS, MOVES, sample_posterior
 from ._record import load_record
 
@@ -60,6 +63,10 @@ def _cmd_posterior(args, command_error) -> dict:
         raise command_error(f"--out {args.out} is a file; give a folder")
     if args.walkers < 2 or args.steps < 1:
         raise command_error("--walkers must be >= 2 and --steps >= 1")
+    if not (np.isfinite(args.nu) and args.nu > 0):
+        raise command_error(f"--nu {args.nu!r} must be a positive number")
+    check_data_options(args)
+    _check_inputs_survive(args, command_error)
     record = load_record(args.fit)
     obs = [load_observation(p, record, args) for p in args.recordings]
     static = read_static_test(args.static) if args.static else None
@@ -103,3 +110,19 @@ def _cmd_posterior(args, command_error) -> dict:
         out["trace"] = str(plot_trace(args.out / "trace.png", post))
     print(f"wrote {args.out}", file=sys.stderr)
     return out
+
+
+#: What ``posterior`` writes into its --out folder.
+OUTPUTS = ("posterior.toml", "chain.h5", "corner.png", "trace.png")
+
+
+def _check_inputs_survive(args, command_error) -> None:
+    """Refuse inputs that are among the files written into --out (they would be replaced)."""
+    inputs = [*args.recordings, args.fit, args.static]
+    for name in OUTPUTS:
+        for p in inputs:
+            if p is not None and same_file(args.out / name, p):
+                raise command_error(
+                    f"input {p} would be overwritten by the output {args.out / name}; "
+                    "give another --out folder"
+                )

@@ -61,6 +61,7 @@ def _signal_function(
     tip_deflection_m: float,
     base: BaseMotion | None,
     oversample_hz: float,
+    t_end: float = np.inf,
 ):
     """A vectorised JAX function ``t ↦ deflection or acceleration`` at the sensor."""
     whisker = record.whisker()
@@ -95,7 +96,15 @@ def _signal_function(
         raise ValueError("--excitation base needs a base-motion file (--base FILE)")
     # Solve on a fine uniform grid (the input linearly interpolated), then interpolate.
     dt = min(float(np.median(np.diff(base.t))), 1.0 / oversample_hz)
-    grid = np.arange(base.t[0], base.t[-1] + 0.5 * dt, dt)
+    # The response is causal: input after the last sample time changes nothing.
+    end = min(float(base.t[-1]), t_end + 2 * dt)
+    if (end - base.t[0]) / dt > MAX_SAMPLES:
+        raise ValueError(
+            f"a base motion over {end - base.t[0]:.3g} s needs {(end - base.t[0]) / dt:.3g} "
+            f"solver steps of {dt:.3g} s, more than the limit of {MAX_SAMPLES:.0e}; "
+            "simulate a shorter --duration"
+        )
+    grid = np.arange(base.t[0], end + 0.5 * dt, dt)
     acc = np.interp(grid, base.t, base.acc)
     state = base_motion_response(whisker, jnp.asarray(grid), jnp.asarray(acc), uniform=True)
     values = observe(whisker, state, observable, absolute=absolute)
@@ -140,19 +149,11 @@ def simulate(
         A :class:`Recording` with columns ``t`` and ``observable``, and metadata.
     """
     _check_inputs(model, excitation, observable, fb_hz, hb_m, rate_hz, duration_s)
+    _check_optional(tip_deflection_m, noise_db, jitter_s)
+    if excitation == "base":
+        _check_base(base, rate_hz, duration_s)
     rng = np.random.default_rng(seed)
     physical = "acceleration" if observable == "acceleration" else "deflection"
-    fn = _signal_function(
-        record,
-        model,
-        excitation,
-        physical,
-        fb_hz=fb_hz,
-        hb_m=hb_m,
-        tip_deflection_m=tip_deflection_m,
-        base=base,
-        oversample_hz=max(20 * rate_hz, 20_000.0),
-    )
     adc = record.adc
     if jitter_s is None:
         jitter_s = adc.jitter_s if observable in ("voltage", "adc") else 0.0
@@ -164,6 +165,18 @@ def simulate(
         if jitter_s > 0:
             t = t + np.clip(rng.standard_normal(t.size) * jitter_s, -0.45 / rate_hz, 0.45 / rate_hz)
             t = t - min(0.0, t[0])
+    fn = _signal_function(
+        record,
+        model,
+        excitation,
+        physical,
+        fb_hz=fb_hz,
+        hb_m=hb_m,
+        tip_deflection_m=tip_deflection_m,
+        base=base,
+        oversample_hz=max(20 * rate_hz, 20_000.0),
+        t_end=float(t[-1]),
+    )
     values = _observe(record, adc, fn, t, observable, noise_db, rng)
     meta = {
         "rate_hz": f"{rate_hz:g}",
@@ -207,6 +220,10 @@ def _noise(clean: np.ndarray, noise_db: float | None, rng: np.random.Generator) 
     return sigma * rng.standard_normal(clean.shape)
 
 
+#: Longest simulation (samples); beyond it the arrays would not fit in memory.
+MAX_SAMPLES = 100_000_000
+
+
 def _check_inputs(model, excitation, observable, fb_hz, hb_m, rate_hz, duration_s) -> None:
     for name, value, allowed in (
         ("model", model, MODELS),
@@ -222,3 +239,43 @@ def _check_inputs(model, excitation, observable, fb_hz, hb_m, rate_hz, duration_
         raise ValueError(f"hb_m = {hb_m!r} must be zero or positive")
     if duration_s * rate_hz < 2:
         raise ValueError("duration_s * rate_hz must give at least 2 samples")
+    if duration_s * rate_hz > MAX_SAMPLES:
+        raise ValueError(
+            f"duration_s * rate_hz = {duration_s * rate_hz:.3g} samples is more than the "
+            f"limit of {MAX_SAMPLES:.0e}; simulate a shorter recording or a lower rate"
+        )
+
+
+def _check_optional(tip_deflection_m, noise_db, jitter_s) -> None:
+    """Refuse NaN and infinities where a number is given (they would fill the output)."""
+    if not np.isfinite(tip_deflection_m):
+        raise ValueError(f"tip_deflection_m = {tip_deflection_m!r} must be a finite number")
+    if noise_db is not None and not np.isfinite(noise_db):
+        raise ValueError(
+            f"noise_db = {noise_db!r} must be a finite SNR in dB (leave it out for no noise)"
+        )
+    if jitter_s is not None and (not np.isfinite(jitter_s) or jitter_s < 0):
+        raise ValueError(f"jitter_s = {jitter_s!r} must be zero or positive")
+
+
+def _check_base(base: BaseMotion | None, rate_hz: float, duration_s: float) -> None:
+    """The base motion must cover the simulated span: outside it the input would be held."""
+    if base is None:
+        return
+    t = np.asarray(base.t, dtype=float)
+    if t.ndim != 1 or t.size < 2 or t.shape != np.shape(base.acc):
+        raise ValueError("base motion: time and acceleration must be 1-D of equal length")
+    # One sample of slack at either end (a first timestamp one step after 0 is common),
+    # but never a sizeable part of the run.
+    tol = max(1.0 / rate_hz, min(float(np.median(np.diff(t))), 0.05 * duration_s))
+    if t[0] > tol:
+        raise ValueError(
+            f"the base motion starts at t = {t[0]:.6g} s but the simulation starts at 0: "
+            "its time column must be in seconds from 0"
+        )
+    if t[-1] < duration_s - tol:
+        raise ValueError(
+            f"the base motion covers t = {t[0]:.6g} .. {t[-1]:.6g} s but the simulation "
+            f"needs 0 .. {duration_s:g} s: give a --duration of at most {t[-1]:.6g} s, or a "
+            "longer base recording"
+        )

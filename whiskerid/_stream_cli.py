@@ -64,8 +64,7 @@ def _cmd_stream(args, command_error) -> dict:
     from ._classify import ClassifierModel
     from ._stream import OnlineClassifier, open_recorder, run_stream, terrain_source
 
-    if args.duration is not None and args.duration <= 0:
-        raise command_error(f"--duration {args.duration!r} must be positive")
+    _check_numbers(args, command_error)
     if args.fast and args.simulate is None:
         raise command_error("--fast needs --simulate (a real chip runs in real time)")
     model = ClassifierModel.load(args.model)
@@ -112,3 +111,25 @@ def _cmd_stream(args, command_error) -> dict:
           + (f", recorded to {out['record']}" if out["record"] else ""),
           file=sys.stderr)  # fmt: skip
     return out
+
+
+#: Longest --simulate stream (s): its terrain is synthesised up front, in memory.
+MAX_SIMULATED_S = 3600.0
+
+
+def _check_numbers(args, command_error) -> None:
+    """Refuse NaN, infinities and non-positive values (argparse's float takes 'nan', 'inf')."""
+    import math
+
+    for flag, value in (("--duration", args.duration), ("--rate", args.rate),
+                        ("--hop", args.hop), ("--speed", args.speed)):  # fmt: skip
+        if value is not None and not (math.isfinite(value) and value > 0):
+            hint = " (leave it out to run until Ctrl-C)" if flag == "--duration" else ""
+            raise command_error(f"{flag} {value!r} must be a positive number{hint}")
+    if args.simulate is not None and args.speed >= 5:
+        raise command_error(f"--speed {args.speed:g} m/s is not plausible (0 < v < 5)")
+    if args.simulate is not None and (args.duration or 0) > MAX_SIMULATED_S:
+        raise command_error(
+            f"--duration {args.duration:g} s: a simulated stream lasts at most "
+            f"{MAX_SIMULATED_S:g} s (its terrain is synthesised up front)"
+        )

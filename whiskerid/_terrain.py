@@ -92,6 +92,8 @@ PROFILE_DX_M = 5e-4
 INTERNAL_RATE_HZ = 2000.0
 SETTLE_S = 1.0  # simulated before t = 0 and dropped: the whisker starts from rest
 TAIL_S = 0.5  # simulated after the end: the FFT filtering wraps around at the ends
+MIN_DATASET_DURATION_S = 2.0  # shortest recording synthesize_dataset makes: a window is 1 s
+_SOURCE = "whiskerid terrain simulator"  # metadata that marks the simulator's recordings
 
 
 @dataclass(frozen=True)
@@ -413,8 +415,11 @@ def synthesize_runs(
             raise ValueError(f"unknown terrain {s.terrain!r}; known: {', '.join(TERRAINS)}")
         if not 0 < s.speed_mps < 5:
             raise ValueError(f"speed {s.speed_mps!r} m/s is not plausible (0 < v < 5)")
-    if duration_s * rate_hz < 2:
-        raise ValueError("duration_s * rate_hz must give at least 2 samples")
+    if not (np.isfinite(duration_s) and np.isfinite(rate_hz)) or duration_s * rate_hz < 2:
+        raise ValueError(
+            f"duration_s = {duration_s!r} and rate_hz = {rate_hz!r} must be numbers giving "
+            "at least 2 samples"
+        )
     whisker = record.whisker()
     hall = HallSensor(
         gain_v_per_m=record.hall.gain_v_per_m * amplifier,
@@ -453,10 +458,30 @@ def synthesize_runs(
                 "amplifier": f"{amplifier:g}",
                 "run": str(spec.run),
                 "seed": str(seed),
-                "source": "whiskerid terrain simulator",
+                "source": _SOURCE,
             }
             out.append(Recording(t=ts, columns={"adc": codes}, meta=meta))
     return out
+
+
+def speed_tag(speed_mps: float) -> str:
+    """A speed in file names: mm/s resolution (what seeds a run), two decimals when exact.
+
+    ``0.2`` → ``"0.20"`` (the names of the default speeds), ``0.201`` → ``"0.201"``.
+    """
+    text = f"{round(speed_mps * 1000) / 1000:.3f}"
+    return text[:-1] if text.endswith("0") else text
+
+
+def dataset_paths(out: str | Path, specs: list[RunSpec]) -> list[Path]:
+    """Where :func:`synthesize_dataset` writes each run.
+
+    ``out/<terrain>/<terrain>_v<speed>_r<run>.csv``, the speed as :func:`speed_tag` writes it.
+    """
+    return [
+        Path(out) / s.terrain / f"{s.terrain}_v{speed_tag(s.speed_mps)}_r{s.run:02d}.csv"
+        for s in specs
+    ]
 
 
 def synthesize_dataset(
@@ -468,18 +493,83 @@ def synthesize_dataset(
     runs: int = 4,
     duration_s: float = 30.0,
     seed: int = 0,
+    replace_synthetic: bool = False,
 ) -> list[Path]:
     """Write a labelled dataset ``out/<terrain>/<terrain>_v<speed>_r<run>.csv`` (NOTES §6).
 
+    Args:
+        out: A new or empty folder (one holding CSV files is refused: old and new
+            recordings would be mixed in one dataset).
+        record: The whisker (the paper's by default).
+        terrains: Terrains, each once.
+        speeds: Nominal speeds (m/s), distinct to 1 mm/s.
+        runs: Runs per terrain and speed.
+        duration_s: Length of each recording (s), at least ``MIN_DATASET_DURATION_S``.
+        seed: Dataset seed.
+        replace_synthetic: Replace the simulator's own recordings at the very paths this
+            call writes (for re-running the demo); any other CSV under ``out`` is still
+            refused.
+
     Returns:
         The CSV paths, in terrain, speed, run order.
+
+    Raises:
+        ValueError: Repeated terrains or speeds, a duration that is not a number or too
+            short, or an ``out`` that is a file or already holds recordings.
     """
     if runs < 1:
         raise ValueError("runs must be at least 1")
+    _check_dataset_args(terrains, speeds, duration_s)
     specs = [RunSpec(t, float(v), r) for t in terrains for v in speeds for r in range(runs)]
+    paths = dataset_paths(out, specs)
+    _check_dataset_folder(Path(out), paths if replace_synthetic else [])
     recs = synthesize_runs(specs, record=record, duration_s=duration_s, seed=seed)
-    paths = []
-    for spec, rec in zip(specs, recs, strict=True):
-        name = f"{spec.terrain}_v{spec.speed_mps:.2f}_r{spec.run:02d}.csv"
-        paths.append(write_csv(Path(out) / spec.terrain / name, rec))
-    return paths
+    return [write_csv(path, rec) for path, rec in zip(paths, recs, strict=True)]
+
+
+def _check_dataset_args(terrains, speeds, duration_s) -> None:
+    twice = sorted({t for t in terrains if list(terrains).count(t) > 1})
+    if twice:
+        raise ValueError(f"terrain(s) {', '.join(twice)} given more than once; name each once")
+    tags: dict[str, float] = {}
+    for v in speeds:
+        if not np.isfinite(v):
+            raise ValueError(f"speed {v!r} m/s is not a number")
+        tag = speed_tag(v)
+        if tag in tags:
+            raise ValueError(
+                f"speeds {tags[tag]:g} and {v:g} m/s are the same to 1 mm/s (they would make "
+                "the same recordings under one file name); give distinct speeds"
+            )
+        tags[tag] = v
+    if not (np.isfinite(duration_s) and duration_s >= MIN_DATASET_DURATION_S):
+        raise ValueError(
+            f"duration {duration_s!r} s: each recording must last at least "
+            f"{MIN_DATASET_DURATION_S:g} s (a classifier window is 1 s)"
+        )
+
+
+def _check_dataset_folder(out: Path, replaceable: list[Path]) -> None:
+    """Refuse a file, or a folder already holding recordings (but ``replaceable`` ones)."""
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"{out} is a file; give a new or empty folder")
+    if not out.exists():
+        return
+    own = {p for p in replaceable if p.exists() and _is_synthetic(p)}
+    found = sorted(p for p in out.rglob("*.csv") if p not in own)
+    if found:
+        raise ValueError(
+            f"{out} already holds {len(found)} recording(s) (e.g. {found[0]}); pass a new or "
+            "empty folder: the old recordings would be mixed with the new ones"
+        )
+
+
+def _is_synthetic(path: Path) -> bool:
+    """Whether a CSV's metadata says this simulator wrote it."""
+    with open(path, encoding="utf-8", errors="replace") as fh:
+        for line in fh:
+            if not line.startswith("#"):
+                return False
+            if line.strip() == f"# source: {_SOURCE}":
+                return True
+    return False
