@@ -73,11 +73,18 @@ def add_classify_commands(sub, command_error) -> None:
     t.add_argument("dataset", type=Path)
     t.add_argument("--out", type=Path, required=True, help="model folder to write")
     t.add_argument("--features", choices=FEATURE_KINDS, default="fitted")
-    t.add_argument("--channel", help="column to classify (the first signal column by default)")
+    t.add_argument(
+        "--channel",
+        help="column to classify (by default the first signal column, which must then be the "
+        "same in every recording; kept in the model)",
+    )
     t.add_argument("--window", type=float, default=1.0, help="window length (s)")
     t.add_argument("--hop", type=float, help="window step (s); the window length by default")
     t.add_argument(
-        "--rate", type=float, help="resample to this rate (Hz); from the data by default"
+        "--rate",
+        type=float,
+        help="resample to this rate (Hz), at most the slowest recording's; by default the "
+        "recordings' own, which must then agree within 5 %%",
     )
     t.add_argument("--no-speed", action="store_true", help="do not use speed_mps metadata")
     t.add_argument("--hidden", type=int, nargs="+", help="hidden layer sizes")
