@@ -11,6 +11,7 @@ from whiskerid._classify import (
     check_speed,
     confusion_matrix,
     load_dataset,
+    recording_signal,
     scores,
     windows_of,
 )
@@ -86,9 +87,12 @@ def test_channels_are_named_and_kept(tmp_path):
     model = wi.train_classifier(ws, features="paper",
                                 config=wi._mlp.TrainConfig(hidden=(8,), max_epochs=20))  # fmt: skip
     assert model.channel == "az"
-    other = wi.read_recording(_rec(tmp_path / "other.csv", columns=("adc",)))
+    other = wi.read_recording(_rec(tmp_path / "other.csv", columns=("ax", "ay")))
     with pytest.raises(wi.RecordingError, match="no column 'az', the one the model"):
         model.classify_recording(other)
+    np.save(tmp_path / "one.npy", np.stack([np.arange(800) / 200.0, np.sin(np.arange(800))]))
+    res = model.classify_recording(wi.read_recording(tmp_path / "one.npy"))  # one column
+    assert res["channel"] == "signal" and len(res["windows"]) == 4
     slow = wi.read_recording(_rec(tmp_path / "slow.csv", rate=50.0, columns=("az",)))
     with pytest.raises(wi.RecordingError, match="sampled at 50 Hz, below the 200 Hz"):
         model.classify_recording(slow)
@@ -108,8 +112,18 @@ def test_untidy_dataset_folders(tmp_path):
     with pytest.raises(ValueError, match="at least two terrains"):
         wi.train_classifier(load_dataset(one))
     short = _dataset(tmp_path / "s", {"x": [{}], "y": [{"seconds": 0.5}]})
+    with pytest.raises(wi.RecordingError, match=r"no windows of \['y'\]"):
+        load_dataset(short, labels=("x", "y"))  # evaluating as much as training
+    ws = load_dataset(_dataset(tmp_path / "t", {"x": [{}], "y": [{"f": 60.0}]}))
     with pytest.raises(ValueError, match=r"no windows of \['y'\]"):
-        wi.train_classifier(load_dataset(short))
+        wi.train_classifier(ws.subset(ws.labels == 0))
+
+
+def test_a_constant_signal_is_refused(tmp_path):
+    t = np.arange(800) / 200.0
+    wi.write_csv(tmp_path / "flat.csv", wi.Recording(t=t, columns={"adc": np.full(800, 13200)}))
+    with pytest.raises(wi.RecordingError, match=r"'adc' is constant.*disconnected or saturated"):
+        recording_signal(wi.read_recording(tmp_path / "flat.csv"), None)
 
 
 def test_flat_lined_sensor_gives_finite_features():

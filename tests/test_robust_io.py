@@ -300,7 +300,9 @@ def test_simulate_refuses_non_finite_and_absurd_numbers(tmp_path, capsys, argv, 
     ("t", "duration", "message"),
     [
         (np.arange(0, 1, 1e-3), "2", "covers t = 0 .. 0.999 s but the simulation needs 0 .. 2 s"),
-        (np.arange(5, 2000, 5.0), "1", "starts at t = 5 s"),  # time in ms
+        (np.arange(0.5, 3, 1e-3), "2", "starts at t = 0.5 s"),
+        (np.arange(5, 2000, 5.0), "1", "sampled every 5 s"),  # time in ms
+        (np.arange(0, 2000, 5.0), "1", "is its time column in seconds"),  # ms from 0
     ],
 )
 def test_simulate_refuses_a_base_motion_not_covering_the_run(
@@ -362,17 +364,19 @@ def test_poor_fit_warning_names_the_recording_below_3_db():
     assert _poor_fit_warnings([{"name": "x", "snr_db": math.nan}])
 
 
-def test_calibrating_a_recording_timed_in_ms_is_a_poor_fit(tmp_path, capsys):
+def test_calibrating_a_recording_timed_in_ms_is_refused(tmp_path, capsys):
+    """With rate_hz metadata the timestamps contradict it; without, the sampling is far
+    too slow for the whisker's first mode. Either way nothing is fitted or written."""
     sim = wi.simulate(wi.paper_record(), excitation="decay", rate_hz=200.0, duration_s=3.0,
                       noise_db=30.0, seed=1)  # fmt: skip
     sim.t = sim.t * 1000.0  # milliseconds where seconds are expected
-    rec = wi.write_csv(tmp_path / "ms.csv", sim)
     whisker = wi.paper_record().save(tmp_path / "w.toml")
     out = tmp_path / "cal.toml"
-    argv = ["calibrate", str(rec), "--whisker", str(whisker), "--out", str(out), "--json"]
-    assert main(argv) == 0
-    captured = capsys.readouterr()
-    js = json.loads(captured.out)
-    assert js["status"] == "poor fit" and js["recordings"][0]["snr_db"] < 3
-    assert "warning: poor fit of ms.csv" in captured.err
-    assert wi.load_record(out).extra["fit"]["status"] == "poor fit"
+    assert "rate_hz" in sim.meta
+    for name, message in (("meta.csv", "the time column must be in seconds"),
+                          ("bare.csv", "far too slowly for the whisker's first mode")):  # fmt: skip
+        rec = wi.write_csv(tmp_path / name, sim)
+        _refused(capsys, ["calibrate", str(rec), "--whisker", str(whisker), "--out", str(out)],
+                 message)  # fmt: skip
+        assert not out.exists()
+        sim.meta.pop("rate_hz", None)

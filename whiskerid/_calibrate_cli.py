@@ -139,9 +139,26 @@ def _observable(args, rec, col: str) -> str:
     )
 
 
+def _check_sampling(rec, record) -> None:
+    """Refuse ``rate_hz`` metadata at odds with the timestamps, and sampling far too slow
+    for the whisker's first mode (a time column in ms read as seconds is 1000 times too
+    slow): a fit to either would end with numbers, all of them wrong."""
+    from ._classify import recording_rate, timestamp_rate
+
+    recording_rate(rec)
+    rate = timestamp_rate(rec.t)
+    f1 = float(record.whisker().natural_frequencies_hz[0])
+    if f1 > 5 * rate:
+        raise RecordingError(
+            f"{rec.source}: sampled at {rate:.4g} Hz, far too slowly for the whisker's first "
+            f"mode ({f1:.4g} Hz from its record): is the time column in seconds?"
+        )
+
+
 def load_observation(path: Path, record, args) -> Observation:
     """Read one recording and turn it into an :class:`Observation` per the CLI flags."""
     rec = read_recording(path, time_col=args.time_col)
+    _check_sampling(rec, record)
     signal_cols = [c for c in rec.columns if c != args.base_col]
     if args.signal_col is not None:
         col = args.signal_col

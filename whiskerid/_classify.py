@@ -236,10 +236,31 @@ def window_samples(window_s: float, hop_s: float | None, rate_hz: float) -> tupl
     return window, hop
 
 
-def recording_signal(rec: Recording, channel: str | None) -> np.ndarray:
-    """The channel to classify (the first signal column by default), checked."""
+def recording_signal(rec: Recording, channel: str | None, *, only_column_ok: bool = False
+                     ) -> np.ndarray:  # fmt: skip
+    """The channel to classify (the first signal column by default), checked.
+
+    Args:
+        rec: The recording.
+        channel: Column name; None: the first signal column.
+        only_column_ok: When ``channel`` is missing but the recording has a single signal
+            column, take that one (a model trained on CSV column ``adc`` reading an NPY
+            recording, whose column is always ``signal``).
+
+    Raises:
+        RecordingError: No such column, bad samples, or a constant signal (a disconnected
+            or saturated sensor: any label given to it would be made up).
+    """
+    if only_column_ok and channel not in rec.columns and len(rec.columns) == 1:
+        channel = None
     x = np.asarray(rec.signal(channel), dtype=float)
-    check_samples(rec.t, x, where=rec.source or "recording")
+    where = rec.source or "recording"
+    check_samples(rec.t, x, where=where)
+    if np.ptp(x) == 0:
+        raise RecordingError(
+            f"{where}: column {channel or next(iter(rec.columns))!r} is constant ({x[0]:g}): "
+            "a disconnected or saturated sensor? There is no vibration to classify"
+        )
     return x
 
 
@@ -315,6 +336,13 @@ def load_dataset(
         rate_hz: Rate to resample to (no recording may be slower); by default the
             recordings' own rate, which must then agree within :data:`RATE_TOLERANCE`.
         labels: Class names in model order (a model's); the folder names by default.
+            With ``labels`` (evaluating a model), a recording with a single signal column
+            is read whatever its name.
+
+    Raises:
+        RecordingError: Unreadable or unfit recordings (see :func:`recording_rate`,
+            :func:`check_rate`, :func:`recording_signal`), or a label folder none of whose
+            recordings holds one window.
     """
     files = list_dataset(root)
     names = tuple(files) if labels is None else tuple(labels)
@@ -330,8 +358,8 @@ def load_dataset(
     chunks, ys, groups, speeds, sources, starts = [], [], [], [], [], []
     for i, (lab, rec) in enumerate(recs):
         check_rate(rec, rate)
-        w, st = windows_of(rec.t, recording_signal(rec, channel), rate_hz=rate, window=window,
-                           hop=hop)  # fmt: skip
+        x = recording_signal(rec, channel, only_column_ok=labels is not None)
+        w, st = windows_of(rec.t, x, rate_hz=rate, window=window, hop=hop)
         chunks.append(w)
         ys.append(np.full(len(w), names.index(lab)))
         groups.append(np.full(len(w), i))
@@ -351,6 +379,12 @@ def load_dataset(
     )
     if len(ws) == 0:
         raise RecordingError(f"{root}: recordings are shorter than one window ({window_s} s)")
+    empty = sorted(set(files) - {names[k] for k in np.unique(ws.labels)})
+    if empty:
+        raise RecordingError(
+            f"{root}: no windows of {empty}: their recordings are shorter than one window "
+            f"({window_s:g} s); record longer, pass a shorter window, or move them away"
+        )
     return ws
 
 
@@ -651,17 +685,20 @@ class ClassifierModel:
         """Labels of every window of a recording, and one for the whole (mean probability).
 
         Each window's ``label`` and ``confidence`` fuse its context (``context_s``);
-        ``window_label`` and ``window_confidence`` are the window's own.
+        ``window_label`` and ``window_confidence`` are the window's own. ``channel`` is the
+        column classified: the model's, or a recording's only signal column whatever its
+        name (an NPY recording's is ``signal``).
         """
         if self.spec.channels != 1:
             raise ValueError("classify_recording reads one channel; this model takes several")
-        if self.channel is not None and self.channel not in rec.columns:
+        if self.channel is not None and self.channel not in rec.columns and len(rec.columns) > 1:
             raise RecordingError(
                 f"{rec.source or 'recording'}: no column {self.channel!r}, the one the model "
                 f"was trained on (columns: {list(rec.columns)}): rename the column, or "
                 "train a model on one of these"
             )
-        x = recording_signal(rec, self.channel)
+        x = recording_signal(rec, self.channel, only_column_ok=True)
+        used = self.channel if self.channel in rec.columns else next(iter(rec.columns))
         check_rate(rec, self.rate_hz)
         w, starts = windows_of(rec.t, x, rate_hz=self.rate_hz, window=self.window, hop=self.hop)
         if len(w) == 0:
@@ -682,6 +719,7 @@ class ClassifierModel:
         return {
             "label": self.labels[int(np.argmax(mean))],
             "confidence": float(mean.max()),
+            "channel": used,
             "context_s": self.context_s,
             "windows": [
                 {"start_s": round(float(starts[i]), 6), "label": self.labels[k],
@@ -718,6 +756,8 @@ class ClassifierModel:
     def save(self, path: str | Path) -> Path:
         """Write ``path/model.json`` and ``path/weights.npz``."""
         path = Path(path)
+        if path.exists() and not path.is_dir():
+            raise ValueError(f"{path} is a file; a model is a folder: give a folder name")
         path.mkdir(parents=True, exist_ok=True)
         arrays = {f"m{j}_{k}": a for j, n in enumerate(self.nets) for k, a in to_arrays(n).items()}
         np.savez(path / MODEL_WEIGHTS, **arrays)
@@ -997,9 +1037,9 @@ def format_confusion(conf, labels) -> str:
     width = max(9, max(len(s) for s in short))
     lines = ["true \\ pred".ljust(width + 2) + " ".join(s.rjust(width) for s in short) + "  acc"]
     for i, lab in enumerate(short):
-        acc = conf[i, i] / max(conf[i].sum(), 1)
+        acc = f"{conf[i, i] / conf[i].sum():.3f}" if conf[i].sum() else "    -"  # none seen
         cells = " ".join(str(v).rjust(width) for v in conf[i])
-        lines.append(lab.ljust(width + 2) + cells + f"  {acc:.3f}")
+        lines.append(lab.ljust(width + 2) + cells + f"  {acc}")
     return "\n".join(lines)
 
 

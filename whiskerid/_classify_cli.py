@@ -258,6 +258,9 @@ def _cmd_classify(args) -> dict:
     model = _load_model(args.model, args.context)
     rec = read_recording(args.recording)
     res = model.classify_recording(rec, speed=args.speed)
+    if model.channel is not None and res["channel"] != model.channel:
+        _say(f"note: the model was trained on column {model.channel!r}; this recording's "
+             f"only signal column is {res['channel']!r}, classified instead")  # fmt: skip
     _say(f"{args.recording}: {res['label']} (confidence {res['confidence']:.3f}, "
          f"{len(res['windows'])} windows)")  # fmt: skip
     return {"recording": str(args.recording), **res}

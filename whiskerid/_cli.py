@@ -131,10 +131,12 @@ def _cmd_simulate(args) -> dict:
         if args.base is None:
             raise CommandError("--excitation base needs --base FILE (time and base acceleration)")
         rec = read_recording(args.base)
+        from ._classify import recording_rate
         from ._io import check_samples
 
         acc = rec.signal(args.base_col)
         check_samples(rec.t, acc, where=str(args.base))
+        recording_rate(rec)  # rate_hz metadata, if any, must agree with the timestamps
         base = BaseMotion(t=rec.t, acc=acc)
     sim = simulate(
         record,

@@ -258,6 +258,11 @@ def _check_optional(tip_deflection_m, noise_db, jitter_s) -> None:
         raise ValueError(f"jitter_s = {jitter_s!r} must be zero or positive")
 
 
+#: Slowest base-motion sampling accepted (s): 20 Hz, below the paper whisker's first mode
+#: (46 Hz) by half; a time column in ms read as seconds steps by whole seconds.
+MAX_BASE_STEP_S = 0.05
+
+
 def _check_base(base: BaseMotion | None, rate_hz: float, duration_s: float) -> None:
     """The base motion must cover the simulated span: outside it the input would be held."""
     if base is None:
@@ -265,9 +270,15 @@ def _check_base(base: BaseMotion | None, rate_hz: float, duration_s: float) -> N
     t = np.asarray(base.t, dtype=float)
     if t.ndim != 1 or t.size < 2 or t.shape != np.shape(base.acc):
         raise ValueError("base motion: time and acceleration must be 1-D of equal length")
+    step = float(np.median(np.diff(t)))
+    if step > MAX_BASE_STEP_S:
+        raise ValueError(
+            f"the base motion is sampled every {step:.6g} s: a vibration record that slow "
+            "says nothing about a whisker; is its time column in seconds (not ms)?"
+        )
     # One sample of slack at either end (a first timestamp one step after 0 is common),
     # but never a sizeable part of the run.
-    tol = max(1.0 / rate_hz, min(float(np.median(np.diff(t))), 0.05 * duration_s))
+    tol = max(1.0 / rate_hz, min(step, 0.05 * duration_s))
     if t[0] > tol:
         raise ValueError(
             f"the base motion starts at t = {t[0]:.6g} s but the simulation starts at 0: "
