@@ -10,7 +10,8 @@ import pytest
 from helpers import ALU
 
 import whiskerid as wi
-from whiskerid._calibrate import release_time
+from whiskerid._calibrate import GTOL, release_time
+from whiskerid._lsq import gradient_cosine
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "cantilever"
 
@@ -55,6 +56,28 @@ def test_decay_adc_200hz_recovers_f1_and_zeta_from_30_percent_off(paper, decay_f
     # the 1-sigma is honest in size: the error is within a few sigma, and sigma is not huge
     assert abs(p["f1_hz"]["value"] - f1) < 5 * p["f1_hz"]["std"] < 0.01 * f1
     assert 0.5 < decay_fit.diagnostics["reduced_chi2"] < 2
+
+
+def test_convergence_is_judged_by_the_gradient_too(paper, decay_fit):
+    """Converged means stationary: the solver's step test, or no parameter direction with
+    a cosine to the residuals above GTOL (it can stall at rounding level on long real
+    recordings). Two steps from 30 % off are neither."""
+    rec, _, _ = paper
+    assert decay_fit.diagnostics["gradient_cosine"] < GTOL
+    obs = _pluck(rec, "adc", rate_hz=200, duration_s=10, noise_db=30, seed=11,
+                 tip_deflection_m=2e-3)  # fmt: skip
+    early = wi.calibrate(_off_by_30_percent(rec), obs, max_steps=2)
+    assert early.diagnostics["gradient_cosine"] > 1e3 * GTOL
+    assert early.status == "not converged" and not early.ok
+
+
+def test_gradient_cosine_is_zero_at_a_least_squares_solution():
+    rng = np.random.default_rng(0)
+    a, b = rng.standard_normal((50, 3)) * [1.0, 1e3, 1e-3], rng.standard_normal(50)
+    x = np.linalg.lstsq(a, b, rcond=None)[0]
+    fn = lambda p, args: args[0] @ p - args[1]
+    assert float(gradient_cosine(fn, jnp.asarray(x), (a, b))) < 1e-9
+    assert float(gradient_cosine(fn, jnp.asarray(x * 1.01), (a, b))) > 1e-4
 
 
 def test_vibrations_alone_never_report_both_EI_and_C(decay_fit):

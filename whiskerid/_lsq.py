@@ -91,6 +91,16 @@ def covariance(fn, y, args=None) -> tuple[jax.Array, jax.Array]:
     return s2 * jnp.linalg.pinv(jac.T @ jac, hermitian=True), s2
 
 
+def gradient_cosine(fn, y, args=None) -> jax.Array:
+    """MINPACK's ``gtol`` measure at ``y``: the largest ``|cos|`` between the residual
+    vector and a column of the Jacobian (0 at a stationary point, whatever the scales of
+    the parameters and residuals); ``y`` must be a flat 1-D array."""
+    r = fn(y, args)
+    jac = jax.jacfwd(lambda p: fn(p, args))(y)
+    norms = jnp.linalg.norm(jac, axis=0) * jnp.linalg.norm(r)
+    return jnp.max(jnp.abs(jac.T @ r) / jnp.maximum(norms, jnp.finfo(r.dtype).tiny))
+
+
 def correlation(cov: jax.Array) -> jax.Array:
     """Correlation matrix of a covariance matrix."""
     sd = jnp.sqrt(jnp.diag(cov))
