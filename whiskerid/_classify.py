@@ -251,17 +251,25 @@ def recording_signal(rec: Recording, channel: str | None, *, only_column_ok: boo
         RecordingError: No such column, bad samples, or a constant signal (a disconnected
             or saturated sensor: any label given to it would be made up).
     """
-    if only_column_ok and channel not in rec.columns and len(rec.columns) == 1:
-        channel = None
-    x = np.asarray(rec.signal(channel), dtype=float)
+    name = signal_column(rec, channel, only_column_ok=only_column_ok)
+    x = np.asarray(rec.signal(name), dtype=float)
     where = rec.source or "recording"
     check_samples(rec.t, x, where=where)
     if np.ptp(x) == 0:
         raise RecordingError(
-            f"{where}: column {channel or next(iter(rec.columns))!r} is constant ({x[0]:g}): "
-            "a disconnected or saturated sensor? There is no vibration to classify"
+            f"{where}: column {name!r} is constant ({x[0]:g}): a disconnected or saturated "
+            "sensor? There is no vibration to classify"
         )
     return x
+
+
+def signal_column(rec: Recording, channel: str | None, *, only_column_ok: bool = False) -> str:
+    """The name of the column :func:`recording_signal` reads (same arguments)."""
+    if not rec.columns:
+        raise RecordingError(f"{rec.source or 'recording'}: no signal column")
+    if channel is None or (only_column_ok and channel not in rec.columns and len(rec.columns) == 1):
+        return next(iter(rec.columns))
+    return channel
 
 
 def _visible(p: Path) -> bool:
@@ -697,8 +705,8 @@ class ClassifierModel:
                 f"was trained on (columns: {list(rec.columns)}): rename the column, or "
                 "train a model on one of these"
             )
-        x = recording_signal(rec, self.channel, only_column_ok=True)
-        used = self.channel if self.channel in rec.columns else next(iter(rec.columns))
+        used = signal_column(rec, self.channel, only_column_ok=True)
+        x = recording_signal(rec, used)
         check_rate(rec, self.rate_hz)
         w, starts = windows_of(rec.t, x, rate_hz=self.rate_hz, window=self.window, hop=self.hop)
         if len(w) == 0:
