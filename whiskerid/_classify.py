@@ -156,7 +156,11 @@ def check_rate(rec: Recording, rate_hz: float) -> float:
     """The recording's rate, refused when below ``rate_hz`` (resampling up cannot add
     the frequencies between the two Nyquist limits; the features would see an empty
     band and a model would read it as a terrain)."""
-    own = recording_rate(rec)
+    return _not_slower(rec, recording_rate(rec), rate_hz)
+
+
+def _not_slower(rec: Recording, own: float, rate_hz: float) -> float:
+    """:func:`check_rate` given the recording's own rate ``own``."""
     if own < rate_hz * (1 - RATE_TOLERANCE):
         hint = " (is the time column in seconds?)" if own < rate_hz / 50 else ""
         raise RecordingError(
@@ -358,14 +362,15 @@ def load_dataset(
     if unknown:
         raise RecordingError(f"{root}: labels {unknown} are not among the classes {list(names)}")
     recs = [(lab, read_recording(f)) for lab in files for f in files[lab]]
-    rate = _dataset_rate(recs, root) if rate_hz is None else float(rate_hz)
+    rates = [recording_rate(rec) for _, rec in recs]
+    rate = _dataset_rate(rates, recs, root) if rate_hz is None else float(rate_hz)
     if not (np.isfinite(rate) and rate > 0):
         raise ValueError(f"rate {rate_hz!r} Hz must be a positive number")
     window, hop = window_samples(window_s, hop_s, rate)
     channel = _first_channel(recs, root) if channel is None else channel
     chunks, ys, groups, speeds, sources, starts = [], [], [], [], [], []
-    for i, (lab, rec) in enumerate(recs):
-        check_rate(rec, rate)
+    for i, ((lab, rec), own) in enumerate(zip(recs, rates, strict=True)):
+        _not_slower(rec, own, rate)
         x = recording_signal(rec, channel, only_column_ok=labels is not None)
         w, st = windows_of(rec.t, x, rate_hz=rate, window=window, hop=hop)
         chunks.append(w)
@@ -396,10 +401,10 @@ def load_dataset(
     return ws
 
 
-def _dataset_rate(recs: list[tuple[str, Recording]], root) -> float:
+def _dataset_rate(rates: list[float], recs: list[tuple[str, Recording]], root) -> float:
     """The recordings' common rate (the first one's), refused when they differ: windows
     of one length in samples would then span different times and bands."""
-    rates = np.array([recording_rate(rec) for _, rec in recs])
+    rates = np.asarray(rates)
     lo, hi = int(np.argmin(rates)), int(np.argmax(rates))
     if rates[hi] > rates[lo] * (1 + RATE_TOLERANCE):
         raise RecordingError(
