@@ -138,6 +138,16 @@ def test_cross_validation_tests_recordings_a_model_never_saw():
     assert len(cv["per_recording"]) == 8 and len(cv["accuracy_by_fold"]) == 4
     honest = wi.cross_validate(_toy_windows(n_rec=8), folds=4, config=cfg)
     assert honest["accuracy"] > 0.9 and honest["context_s"] == 3.0
+    assert honest["n_recordings"] == 8 and honest["accuracy_per_recording"] >= 7 / 8
+    assert cv["accuracy_per_recording"] <= 0.5
+
+
+def test_recording_scores_label_a_recording_by_its_mean_probability():
+    """Recording 1 (class 1) has two of three windows right, but the mean probability
+    leans to class 0: wrong, as ``classify`` would label it (a majority vote would not)."""
+    p = np.array([[0.9, 0.1], [0.2, 0.8], [0.8, 0.2], [0.4, 0.6], [0.4, 0.6]])
+    res = wi.recording_scores(p, np.array([0, 0, 1, 1, 1]), np.array([0, 0, 1, 1, 1]))
+    assert res == {"accuracy_per_recording": 0.5, "n_recordings": 2}
 
 
 def test_absolute_octave_levels_only_with_the_speed():

@@ -51,6 +51,7 @@ from ._classify import evaluate_classifier as evaluate_classifier
 from ._classify import fuse_context as fuse_context
 from ._classify import load_dataset as load_dataset
 from ._classify import paper_protocol as paper_protocol
+from ._classify import recording_scores as recording_scores
 from ._classify import split_by_recording as split_by_recording
 from ._classify import train_classifier as train_classifier
 from ._features import FeatureSpec as FeatureSpec

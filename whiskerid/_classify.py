@@ -1023,7 +1023,8 @@ def evaluate(model: ClassifierModel, ws: WindowSet) -> dict:
     """Scores of ``model`` on labelled windows (labels must be among the model's).
 
     Labels fuse each window's context as the model says (``context_s``); the accuracy of
-    every window on its own is reported next to them (``accuracy_per_window``).
+    every window on its own is reported next to them (``accuracy_per_window``), and that of
+    whole-recording labels (:func:`recording_scores`).
     """
     missing = sorted(set(ws.label_names) - set(model.labels))
     if missing:
@@ -1040,7 +1041,19 @@ def _scores_with_context(model: ClassifierModel, p: np.ndarray, y: np.ndarray, w
     out = scores(confusion_matrix(y, np.argmax(fused, axis=1), len(model.labels)), model.labels)
     out["context_s"] = model.context_s
     out["accuracy_per_window"] = float(np.mean(np.argmax(p, axis=1) == y))
+    out.update(recording_scores(p, y, ws.recording))
     return out
+
+
+def recording_scores(proba: np.ndarray, labels: np.ndarray, recording: np.ndarray) -> dict:
+    """``accuracy_per_recording``: the share of recordings whose whole-recording label (the
+    mean of their windows' probabilities, as ``classify`` gives it) is right, and
+    ``n_recordings``. A different task from a label per window: it waits for the end of the
+    recording, and there are far fewer recordings than windows to count."""
+    recs = np.unique(recording)
+    right = [np.argmax(proba[recording == r].mean(axis=0)) == labels[recording == r][0]
+             for r in recs]  # fmt: skip
+    return {"accuracy_per_recording": float(np.mean(right)), "n_recordings": int(recs.size)}
 
 
 def format_confusion(conf, labels) -> str:
@@ -1156,7 +1169,8 @@ def cross_validate(
 
     Returns:
         :func:`scores` of the fused labels pooled over all windows, plus
-        ``accuracy_per_window``, ``context_s``, ``folds``, ``accuracy_by_fold`` (fused
+        ``accuracy_per_window``, :func:`recording_scores` (whole-recording labels),
+        ``context_s``, ``folds``, ``accuracy_by_fold`` (fused
         labels) and ``per_recording`` (source and label → fused accuracy).
     """
     check_classes(ws)
@@ -1179,6 +1193,7 @@ def cross_validate(
     out = scores(confusion_matrix(y, pred, len(ws.label_names)), ws.label_names)
     out.update(
         accuracy_per_window=float(np.mean(np.argmax(proba, axis=1) == y)),
+        **recording_scores(proba, y, ws.recording),
         context_s=context_s,
         folds=folds,
         accuracy_by_fold=[round(float(np.mean(pred[fold == k] == y[fold == k])), 4)

@@ -205,9 +205,11 @@ def _cmd_train(args) -> dict:
                             config=config, context_s=args.context, use_speed=use_speed,
                             progress=sys.stderr.isatty())  # fmt: skip
         cv = {k: cv[k] for k in ("folds", "accuracy", "accuracy_per_window", "per_class",
-                                 "accuracy_by_fold", "context_s")}  # fmt: skip
+                                 "accuracy_by_fold", "context_s", "accuracy_per_recording",
+                                 "n_recordings")}  # fmt: skip
         _say(f"{args.cv}-fold cross-validation by recording: {cv['accuracy']:.3f} "
-             f"({cv['accuracy_per_window']:.3f} per window)")  # fmt: skip
+             f"({cv['accuracy_per_window']:.3f} per window; whole recordings "
+             f"{cv['accuracy_per_recording']:.3f} of {cv['n_recordings']})")  # fmt: skip
     model = train_classifier(ws, features=args.features, config=config,
                              use_speed=use_speed, channel=args.channel, hop=hop,
                              context_s=args.context)  # fmt: skip
@@ -244,7 +246,8 @@ def _cmd_evaluate(args) -> dict:
     _say(format_confusion(res["confusion"], res["labels"]))
     _say(f"accuracy {res['accuracy']:.4f} on {res['n_windows']} windows, labels resting on "
          f"{model.context_s:g} s (each window on its own: "
-         f"{res['accuracy_per_window']:.4f})")  # fmt: skip
+         f"{res['accuracy_per_window']:.4f}; whole recordings: "
+         f"{res['accuracy_per_recording']:.4f} of {res['n_recordings']})")  # fmt: skip
     if args.plot:
         plot_confusion(args.plot, res["confusion"], res["labels"])
         res["plot"] = str(args.plot)
