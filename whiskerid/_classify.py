@@ -934,7 +934,8 @@ def fit_on_features(
             "val_accuracy": round(float(np.mean([r.val_accuracy for r in runs])), 4),
             "members": len(nets), "train_windows": len(ws) if config.refit else int((~val).sum()),
             "val_windows": int(val.sum()),
-            "seed": config.seed, "hidden": list(config.hidden)}  # fmt: skip
+            "seed": config.seed, "hidden": list(config.hidden),
+            "weight_decay": config.weight_decay, "input_noise": config.input_noise}  # fmt: skip
     return ClassifierModel(spec, ws.label_names, mean, std, nets, hop=ws.windows.shape[-1],
                            info=info, context_s=context_s)  # fmt: skip
 
