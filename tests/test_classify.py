@@ -298,6 +298,7 @@ def test_cli_synth_train_evaluate_classify(tmp_path, capsys):
     assert main([*train, "--ensemble", "1", "--cv", "2", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["labels"] == ["brick", "sand"] and 20 <= out["windows"] <= 24
+    assert (out["weight_decay"], out["input_noise"]) == (1.0, 0.3)  # fitted's defaults
     cv = out["cross_validation"]
     assert cv["folds"] == 2 and len(cv["accuracy_by_fold"]) == 2 and 0 <= cv["accuracy"] <= 1
     head = json.loads((model / "model.json").read_text())
