@@ -249,7 +249,8 @@ def _classification_stage(out: Path, *, plots: bool, say) -> dict:
     say(format_confusion(res["confusion"], res["labels"]))
     say(f"      accuracy on held-out recordings: {res['accuracy']:.3f} ({res['n_windows']} "
         f"windows; labels resting on {model.context_s:g} s; each window on its own "
-        f"{res['accuracy_per_window']:.3f})")  # fmt: skip
+        f"{res['accuracy_per_window']:.3f}; whole recordings "
+        f"{res['accuracy_per_recording']:.3f} of {res['n_recordings']})")  # fmt: skip
     if plots:
         res["png"] = str(
             plot_confusion(out / "terrain_confusion.png", res["confusion"], res["labels"])
@@ -257,6 +258,7 @@ def _classification_stage(out: Path, *, plots: bool, say) -> dict:
     return {
         "accuracy": res["accuracy"],
         "accuracy_per_window": res["accuracy_per_window"],
+        "accuracy_per_recording": res["accuracy_per_recording"],
         "context_s": model.context_s,
         "per_class": res["per_class"],
         "model": str(out / "terrain-model"),
