@@ -143,11 +143,51 @@ def test_cross_validation_tests_recordings_a_model_never_saw():
 
 
 def test_recording_scores_label_a_recording_by_its_mean_probability():
-    """Recording 1 (class 1) has two of three windows right, but the mean probability
+    """Recording ``b`` (class 1) has two of three windows right, but the mean probability
     leans to class 0: wrong, as ``classify`` would label it (a majority vote would not)."""
+    ws = replace(_toy_windows(n_rec=2, per=3), sources=["dir/a.csv", "dir/b.csv"])
+    ws = ws.subset(np.arange(1, 6))  # a: 2 windows, b: 3
     p = np.array([[0.9, 0.1], [0.2, 0.8], [0.8, 0.2], [0.4, 0.6], [0.4, 0.6]])
-    res = wi.recording_scores(p, np.array([0, 0, 1, 1, 1]), np.array([0, 0, 1, 1, 1]))
-    assert res == {"accuracy_per_recording": 0.5, "n_recordings": 2}
+    res = wi.recording_scores(p, ws.labels, ws)
+    assert res["accuracy_per_recording"] == 0.5 and res["n_recordings"] == 2
+    assert res["wrong_recordings"] == [
+        {
+            "recording": "high/b.csv",
+            "predicted": "low",
+            "confidence": pytest.approx(0.5333, abs=1e-4),
+        }
+    ]
+
+
+def _tone_csvs(root, runs: int, seed: int = 2) -> None:
+    """``root/low`` and ``root/high``: ``runs`` CSV recordings each, 6 s at 200 Hz of a 20
+    or a 60 Hz tone in noise."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(1200) / 200.0
+    for label, f in (("low", 20.0), ("high", 60.0)):
+        for r in range(runs):
+            x = np.sin(2 * np.pi * f * t + rng.uniform(0, 6)) + rng.standard_normal(t.size)
+            wi.write_csv(root / label / f"{label}{r}.csv",
+                         wi.Recording(t=t, columns={"hall": x}, meta={"rate_hz": 200}))  # fmt: skip
+
+
+def test_cli_evaluate_names_the_recordings_labelled_wrong(tmp_path, capsys):
+    """A 60 Hz recording filed under ``low`` is the one recording labelled wrong whole."""
+    _tone_csvs(tmp_path / "train", runs=3)
+    model = tmp_path / "m"
+    args = ["--out", str(model), "--hidden", "8", "--max-epochs", "40"]
+    assert main(["train", str(tmp_path / "train"), *args]) == 0
+    _tone_csvs(tmp_path / "test", runs=2, seed=5)
+    (tmp_path / "test" / "high" / "high1.csv").rename(tmp_path / "test" / "low" / "misfiled.csv")
+    capsys.readouterr()
+    assert main(["evaluate", str(model), str(tmp_path / "test"), "--json"]) == 0
+    captured = capsys.readouterr()
+    res = json.loads(captured.out)
+    assert res["n_recordings"] == 4 and res["accuracy_per_recording"] == 0.75
+    assert [(w["recording"], w["predicted"]) for w in res["wrong_recordings"]] == [
+        ("low/misfiled.csv", "high")
+    ]
+    assert "labelled wrong whole: low/misfiled.csv as high" in captured.err
 
 
 def test_absolute_octave_levels_only_with_the_speed():

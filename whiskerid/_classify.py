@@ -1042,19 +1042,41 @@ def _scores_with_context(model: ClassifierModel, p: np.ndarray, y: np.ndarray, w
     out = scores(confusion_matrix(y, np.argmax(fused, axis=1), len(model.labels)), model.labels)
     out["context_s"] = model.context_s
     out["accuracy_per_window"] = float(np.mean(np.argmax(p, axis=1) == y))
-    out.update(recording_scores(p, y, ws.recording))
+    out.update(recording_scores(p, y, ws, model.labels))
     return out
 
 
-def recording_scores(proba: np.ndarray, labels: np.ndarray, recording: np.ndarray) -> dict:
-    """``accuracy_per_recording``: the share of recordings whose whole-recording label (the
-    mean of their windows' probabilities, as ``classify`` gives it) is right, and
-    ``n_recordings``. A different task from a label per window: it waits for the end of the
-    recording, and there are far fewer recordings than windows to count."""
-    recs = np.unique(recording)
-    right = [np.argmax(proba[recording == r].mean(axis=0)) == labels[recording == r][0]
-             for r in recs]  # fmt: skip
-    return {"accuracy_per_recording": float(np.mean(right)), "n_recordings": int(recs.size)}
+def recording_scores(proba: np.ndarray, labels: np.ndarray, ws: WindowSet,
+                     label_names=None) -> dict:  # fmt: skip
+    """Whole-recording labels: the mean of each recording's window probabilities, as
+    ``classify`` labels a recording.
+
+    A different task from a label per window: it waits for the end of the recording, and
+    there are far fewer recordings than windows to count.
+
+    Args:
+        proba: Class probabilities per window of ``ws``.
+        labels: True class per window (indices into ``label_names``).
+        ws: The windows (their recordings and sources).
+        label_names: Class names; ``ws.label_names`` by default.
+
+    Returns:
+        ``accuracy_per_recording`` (share of recordings labelled right), ``n_recordings``
+        and ``wrong_recordings``: each recording labelled wrong, as ``label/file``, with
+        its predicted label and that label's mean probability.
+    """
+    names = ws.label_names if label_names is None else label_names
+    right, wrong = [], []
+    for r in np.unique(ws.recording).tolist():
+        mean = proba[ws.recording == r].mean(axis=0)
+        pred, true = int(np.argmax(mean)), int(labels[ws.recording == r][0])
+        right.append(pred == true)
+        if pred != true:
+            wrong.append({"recording": f"{names[true]}/{Path(ws.sources[r]).name}",
+                          "predicted": names[pred],
+                          "confidence": round(float(mean[pred]), 4)})  # fmt: skip
+    return {"accuracy_per_recording": float(np.mean(right)), "n_recordings": len(right),
+            "wrong_recordings": wrong}  # fmt: skip
 
 
 def format_confusion(conf, labels) -> str:
@@ -1194,7 +1216,7 @@ def cross_validate(
     out = scores(confusion_matrix(y, pred, len(ws.label_names)), ws.label_names)
     out.update(
         accuracy_per_window=float(np.mean(np.argmax(proba, axis=1) == y)),
-        **recording_scores(proba, y, ws.recording),
+        **recording_scores(proba, y, ws),
         context_s=context_s,
         folds=folds,
         accuracy_by_fold=[round(float(np.mean(pred[fold == k] == y[fold == k])), 4)

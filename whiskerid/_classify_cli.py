@@ -10,6 +10,9 @@ from ._features import FEATURE_KINDS
 _FMT = argparse.ArgumentDefaultsHelpFormatter
 
 
+#: Recordings labelled wrong that ``evaluate`` names on stderr (all of them are in --json).
+_SHOW_WRONG = 10
+
 _CONTEXT_HELP = (
     "signal each label rests on (s): the window and the windows before it, fused (mean "
     "log-probability; the label lags a change of terrain by up to S minus one window)"
@@ -122,7 +125,9 @@ def add_classify_commands(sub, command_error) -> None:
     e = sub.add_parser(
         "evaluate",
         help="score a classifier on a labelled dataset",
-        description="Accuracy, per-class accuracy and confusion matrix of MODEL on DATASET.",
+        description="Accuracy, per-class accuracy and confusion matrix of MODEL on DATASET, "
+        "with labels per window and for whole recordings (the recordings labelled wrong "
+        "are named).",
         formatter_class=_FMT,
     )
     e.add_argument("model", type=Path)
@@ -248,6 +253,12 @@ def _cmd_evaluate(args) -> dict:
          f"{model.context_s:g} s (each window on its own: "
          f"{res['accuracy_per_window']:.4f}; whole recordings: "
          f"{res['accuracy_per_recording']:.4f} of {res['n_recordings']})")  # fmt: skip
+    wrong = res["wrong_recordings"]
+    for w in wrong[:_SHOW_WRONG]:
+        _say(f"  labelled wrong whole: {w['recording']} as {w['predicted']} "
+             f"(mean probability {w['confidence']:.3f})")  # fmt: skip
+    if len(wrong) > _SHOW_WRONG:
+        _say(f"  ... and {len(wrong) - _SHOW_WRONG} more (all in --json: wrong_recordings)")
     if args.plot:
         plot_confusion(args.plot, res["confusion"], res["labels"])
         res["plot"] = str(args.plot)
