@@ -138,7 +138,8 @@ def main() -> None:
                 res_c[kind]["cross_validation"] = {
                     k: cv[k] for k in ("accuracy_per_window", "accuracy", "per_class", "folds",
                                        "accuracy_by_fold", "per_recording",
-                                       "accuracy_per_recording", "n_recordings")
+                                       "accuracy_per_recording", "n_recordings",
+                                       "wrong_recordings")
                 }  # fmt: skip
                 print(f"{chans} {kind} {args.folds}-fold by run: "
                       f"{cv['accuracy_per_window']:.3f} / {cv['accuracy']:.3f}; whole runs "
