@@ -190,6 +190,23 @@ def test_cli_evaluate_names_the_recordings_labelled_wrong(tmp_path, capsys):
     assert "labelled wrong whole: low/misfiled.csv as high" in captured.err
 
 
+def test_cli_classify_plot(tmp_path, capsys):
+    """``classify --plot`` saves the signal and its labels over time; a --plot naming the
+    recording is refused before anything is written, and the recording is intact."""
+    _tone_csvs(tmp_path / "ds", runs=2)
+    model = tmp_path / "m"
+    assert main(["train", str(tmp_path / "ds"), "--out", str(model), "--hidden", "8",
+                 "--max-epochs", "40"]) == 0  # fmt: skip
+    rec, png = tmp_path / "ds" / "high" / "high0.csv", tmp_path / "plots" / "high0.png"
+    capsys.readouterr()
+    assert main(["classify", str(model), str(rec), "--plot", str(png), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["plot"] == str(png) and png.stat().st_size > 10_000
+    before = rec.read_bytes()
+    assert main(["classify", str(model), str(rec), "--plot", str(rec)]) == 2
+    assert "is also the input REC" in capsys.readouterr().err and rec.read_bytes() == before
+
+
 def test_absolute_octave_levels_only_with_the_speed():
     """Without the speed a level says how fast a run went as much as what the ground is."""
     ws = _toy_windows()

@@ -6,6 +6,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from ._features import FEATURE_KINDS
+from ._io import check_out_path
 
 _FMT = argparse.ArgumentDefaultsHelpFormatter
 
@@ -147,6 +148,8 @@ def add_classify_commands(sub, command_error) -> None:
     c.add_argument("model", type=Path)
     c.add_argument("recording", type=Path)
     c.add_argument("--speed", type=float, help="robot speed (m/s); from the metadata by default")
+    c.add_argument("--plot", type=Path, metavar="PNG",
+                   help="save the signal and its labels over time as this PNG")  # fmt: skip
     c.add_argument("--context", type=float, metavar="S",
                    help=_CONTEXT_HELP + "; the model's by default")  # fmt: skip
     c.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
@@ -269,6 +272,8 @@ def _cmd_evaluate(args) -> dict:
 def _cmd_classify(args) -> dict:
     from ._io import read_recording
 
+    if args.plot is not None:  # before any work
+        check_out_path(args.plot, "--plot", inputs={"MODEL": args.model, "REC": args.recording})
     model = _load_model(args.model, args.context)
     rec = read_recording(args.recording)
     res = model.classify_recording(rec, speed=args.speed)
@@ -277,7 +282,18 @@ def _cmd_classify(args) -> dict:
              f"only signal column is {res['channel']!r}, classified instead")  # fmt: skip
     _say(f"{args.recording}: {res['label']} (confidence {res['confidence']:.3f}, "
          f"{len(res['windows'])} windows)")  # fmt: skip
-    return {"recording": str(args.recording), **res}
+    out = {"recording": str(args.recording), **res}
+    if args.plot is not None:
+        from ._classify import recording_signal
+        from ._plot import plot_recording_labels
+
+        x = recording_signal(rec, res["channel"])
+        title = f"{args.recording.name}: {res['label']} (mean probability {res['confidence']:.2f})"
+        plot_recording_labels(args.plot, rec.t, x, res, model.labels, window_s=model.window_s,
+                              title=title)  # fmt: skip
+        out["plot"] = str(args.plot)
+        _say(f"wrote {args.plot}")
+    return out
 
 
 CommandError = ValueError  # replaced by the CLI's own class on registration

@@ -77,6 +77,49 @@ def plot_modal_analysis(path: str | Path, cases: list[dict]) -> Path:
     return _save(fig, path)
 
 
+def plot_recording_labels(path: str | Path, t: np.ndarray, x: np.ndarray, result: dict,
+                          labels, *, window_s: float, title: str = "") -> Path:  # fmt: skip
+    """Save a classified recording as a PNG: the signal, shaded by each window's label, and
+    the labels over time (filled: the label fused over the context, as reported; open: the
+    window's own), with the label of the whole recording in the title.
+
+    Args:
+        path: PNG file to write.
+        t: Sample times (s).
+        x: The classified signal.
+        result: :meth:`~whiskerid.ClassifierModel.classify_recording`'s result.
+        labels: The model's class names (the timeline's rows).
+        window_s: Window length (s).
+        title: Title; by default the whole-recording label and its confidence.
+    """
+    plt = _pyplot()
+    labels = list(labels)
+    colours = plt.get_cmap("tab10")
+    fig, (ax_x, ax_l) = plt.subplots(2, 1, figsize=(9, 3 + 0.3 * len(labels)), sharex=True,
+                                     height_ratios=(2, 1 + 0.15 * len(labels)),
+                                     constrained_layout=True)  # fmt: skip
+    ax_x.plot(t, x, lw=0.5, color="0.2")
+    for w in result["windows"]:
+        k = labels.index(w["label"])
+        ax_x.axvspan(w["start_s"], w["start_s"] + window_s, color=colours(k % 10), alpha=0.15,
+                     lw=0)  # fmt: skip
+    ax_x.set_ylabel(result.get("channel") or "signal")
+    starts = np.array([w["start_s"] for w in result["windows"]]) + window_s / 2
+    fused = [labels.index(w["label"]) for w in result["windows"]]
+    own = [labels.index(w["window_label"]) - 0.2 for w in result["windows"]]  # just below
+    ax_l.scatter(starts, own, marker="o", s=30, facecolors="none", edgecolors="0.4",
+                 label="window on its own")  # fmt: skip
+    ax_l.scatter(starts, fused, marker="s", s=14, c=[colours(k % 10) for k in fused],
+                 label=f"label ({result.get('context_s', window_s):g} s of context)")  # fmt: skip
+    ax_l.set_yticks(range(len(labels)), labels)
+    ax_l.set_ylim(-0.5, len(labels) - 0.5)
+    ax_l.set_xlabel("t (s)")
+    ax_l.grid(axis="y", alpha=0.3)
+    ax_l.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7)  # off the points
+    fig.suptitle(title or f"{result['label']} (mean probability {result['confidence']:.2f})")
+    return _save(fig, path)
+
+
 def _save(fig, path) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
