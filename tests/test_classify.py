@@ -191,8 +191,8 @@ def test_cli_evaluate_names_the_recordings_labelled_wrong(tmp_path, capsys):
 
 
 def test_cli_classify_plot(tmp_path, capsys):
-    """``classify --plot`` saves the signal and its labels over time; a --plot naming the
-    recording is refused before anything is written, and the recording is intact."""
+    """``classify --plot`` saves the signal and its labels over time, under exactly the
+    name given; a --plot naming an input is refused before anything is written."""
     _tone_csvs(tmp_path / "ds", runs=2)
     model = tmp_path / "m"
     assert main(["train", str(tmp_path / "ds"), "--out", str(model), "--hidden", "8",
@@ -205,6 +205,11 @@ def test_cli_classify_plot(tmp_path, capsys):
     before = rec.read_bytes()
     assert main(["classify", str(model), str(rec), "--plot", str(rec)]) == 2
     assert "is also the input REC" in capsys.readouterr().err and rec.read_bytes() == before
+    bare = tmp_path / "labels"  # no suffix: written under exactly that name, as PNG
+    assert main(["classify", str(model), str(rec), "--plot", str(bare)]) == 0
+    assert bare.read_bytes()[:4] == b"\x89PNG" and not bare.with_suffix(".png").exists()
+    assert main(["evaluate", str(model), str(tmp_path / "ds"), "--plot", str(model)]) == 2
+    assert "is also the input MODEL" in capsys.readouterr().err
 
 
 def test_absolute_octave_levels_only_with_the_speed():

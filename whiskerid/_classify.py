@@ -1094,11 +1094,9 @@ def format_confusion(conf, labels) -> str:
 
 def plot_confusion(path: str | Path, conf, labels, *, title: str = "") -> Path:
     """Save the row-normalised confusion matrix as a PNG (matplotlib, Agg)."""
-    import matplotlib
+    from ._plot import _pyplot, _save
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = _pyplot()
     conf = np.asarray(conf, dtype=float)
     frac = conf / np.maximum(conf.sum(axis=1, keepdims=True), 1)
     fig, ax = plt.subplots(figsize=(1.0 + 0.8 * len(labels), 0.6 + 0.7 * len(labels)))
@@ -1114,11 +1112,7 @@ def plot_confusion(path: str | Path, conf, labels, *, title: str = "") -> Path:
     ax.set_title(title or f"accuracy {np.trace(conf) / max(conf.sum(), 1):.3f}")
     fig.colorbar(im, ax=ax, fraction=0.046)
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, path, dpi=120)
 
 
 def paper_protocol(

@@ -245,6 +245,8 @@ def _load_model(path, context_s=None):
 def _cmd_evaluate(args) -> dict:
     from ._classify import evaluate, format_confusion, load_dataset, plot_confusion
 
+    if args.plot is not None:  # before any work
+        check_out_path(args.plot, "--plot", inputs={"MODEL": args.model, "DATASET": args.dataset})
     model = _load_model(args.model, args.context)
     ws = load_dataset(args.dataset, channel=model.channel, window_s=model.window / model.rate_hz,
                       rate_hz=model.rate_hz, labels=model.labels)  # fmt: skip

@@ -120,10 +120,12 @@ def plot_recording_labels(path: str | Path, t: np.ndarray, x: np.ndarray, result
     return _save(fig, path)
 
 
-def _save(fig, path) -> Path:
+def _save(fig, path, *, dpi: int = 110) -> Path:
+    """Write ``fig`` as a PNG to exactly ``path`` (without ``format``, matplotlib would
+    write ``path.png`` for a name without a suffix) and close it."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=dpi, format="png")
     import matplotlib.pyplot as plt
 
     plt.close(fig)
