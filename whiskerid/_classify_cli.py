@@ -286,10 +286,9 @@ def _cmd_classify(args) -> dict:
          f"{len(res['windows'])} windows)")  # fmt: skip
     out = {"recording": str(args.recording), **res}
     if args.plot is not None:
-        from ._classify import recording_signal
         from ._plot import plot_recording_labels
 
-        x = recording_signal(rec, res["channel"])
+        x = rec.columns[res["channel"]]  # checked by classify_recording
         title = f"{args.recording.name}: {res['label']} (mean probability {res['confidence']:.2f})"
         plot_recording_labels(args.plot, rec.t, x, res, model.labels, window_s=model.window_s,
                               title=title)  # fmt: skip
