@@ -13,9 +13,9 @@ import time
 import numpy as np
 
 import whiskerid as wi
-from whiskerid._classify import default_spec, features_of, fit_on_features
-from whiskerid._mlp import TrainConfig, default_config
-from whiskerid._terrain import RunSpec
+from whiskerid.classify._classify import default_spec, features_of, fit_on_features
+from whiskerid.classify._mlp import TrainConfig, default_config
+from whiskerid.terrain._terrain import RunSpec
 
 
 def main() -> None:
@@ -24,7 +24,7 @@ def main() -> None:
     recs = wi.synthesize_runs(specs, duration_s=51.0)  # 6 runs × 50 windows = 300 per terrain
     import tempfile
 
-    from whiskerid._io import write_csv
+    from whiskerid.io._recording import write_csv
 
     with tempfile.TemporaryDirectory() as tmp:
         for s, r in zip(specs, recs, strict=True):

@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 import whiskerid as wi
-from whiskerid import _posterior as P
+from whiskerid.posterior import _posterior as P
 
 F1, ZETA, NOISE, N = 48.0, 0.02, 0.05, 500
 

@@ -76,8 +76,9 @@ def main(argv: list[str] | None = None) -> int:
 
     online = worker = None
     if args.model:
+        from whiskerid.hw._stream import BackgroundClassifier, OnlineClassifier, terrain_source
+
         from whiskerid import ClassifierModel, paper_record
-        from whiskerid._stream import BackgroundClassifier, OnlineClassifier, terrain_source
 
         online = OnlineClassifier(ClassifierModel.load(args.model), hop_s=args.hop,
                                   speed_mps=args.speed)  # fmt: skip

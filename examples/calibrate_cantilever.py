@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 import whiskerid as wi
-from whiskerid._calibrate import G0, release_time
+from whiskerid.fit._calibrate import G0, release_time
 
 ROOT = Path(__file__).resolve().parents[1]
 MEASURED_F1 = {30: 16.49, 50: 6.02}  # the data README (authors' FFT peaks)
@@ -70,7 +70,7 @@ def main(argv=None) -> int:
     if not args.data.exists():
         print(f"no data at {args.data}", file=sys.stderr)
         return 2
-    from whiskerid._calibrate_plot import plot_calibration
+    from whiskerid.plot._calibrate import plot_calibration
 
     summary = {}
     for length_cm in (30, 50):

@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 import whiskerid as wi
-from whiskerid._classify import (
+from whiskerid.classify._classify import (
     default_spec,
     evaluate_features,
     features_of,
@@ -48,7 +48,7 @@ from whiskerid._classify import (
     grouped_split,
     plot_confusion,
 )
-from whiskerid._mlp import default_config
+from whiskerid.classify._mlp import default_config
 
 REPO = Path(__file__).resolve().parent.parent
 #: Weight decay of our network here (the library's default, 1, was chosen on the synthetic
@@ -191,7 +191,7 @@ def learning_curve(ws: wi.WindowSet, args, png: Path) -> dict:
                         for name in ("runs", *CONTEXTS)}
         for frac in fractions
     }  # fmt: skip
-    from whiskerid._plot import _pyplot
+    from whiskerid.plot._plot import _pyplot
 
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(5, 3.5))

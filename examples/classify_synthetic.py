@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 import whiskerid as wi
-from whiskerid._classify import (
+from whiskerid.classify._classify import (
     default_spec,
     evaluate_features,
     features_of,
@@ -45,7 +45,7 @@ from whiskerid._classify import (
     format_confusion,
     plot_confusion,
 )
-from whiskerid._mlp import default_config
+from whiskerid.classify._mlp import default_config
 
 
 def _fit(train, kind, seed):

@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import whiskerid as wi
-from whiskerid._plot import _pyplot, plot_modal_analysis
+from whiskerid.plot._plot import _pyplot, plot_modal_analysis
 
 RATE = 20_000.0
 

@@ -31,8 +31,8 @@ from pathlib import Path
 import numpy as np
 
 import whiskerid as wi
-from whiskerid import _posterior as P
-from whiskerid._calibrate import G0, release_time
+from whiskerid.fit._calibrate import G0, release_time
+from whiskerid.posterior import _posterior as P
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -97,7 +97,7 @@ def main(argv=None) -> int:
     if not args.data.exists():
         print(f"no data at {args.data}", file=sys.stderr)
         return 2
-    from whiskerid._posterior_plot import plot_corner, plot_trace
+    from whiskerid.plot._posterior import plot_corner, plot_trace
 
     args.out.mkdir(parents=True, exist_ok=True)
     out = {"settings": {k: str(v) for k, v in vars(args).items()}, "lengths": {}}

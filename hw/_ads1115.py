@@ -1,6 +1,6 @@
 """ADS1115 driver over an smbus2-like bus: config codec, single-shot and continuous reads.
 
-The register map and the data-rate and PGA tables live in ``whiskerid._ads1115_spec`` (shared
+The register map and the data-rate and PGA tables live in ``whiskerid.io._ads1115_spec`` (shared
 with the signal-level ADC model); this module adds the bit layout of the config register, a
 pure encoder/decoder for it, and a driver that retries I2C errors and times out every wait.
 """
@@ -16,7 +16,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from whiskerid._ads1115_spec import (
+from whiskerid.io._ads1115_spec import (
     CODE_MAX,
     CODE_MIN,
     CONFIG_POWER_ON,

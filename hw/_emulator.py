@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from whiskerid._ads1115_spec import (
+from whiskerid.io._ads1115_spec import (
     CONFIG_POWER_ON,
     DATA_RATE_SPS,
     PGA_FSR_V,

@@ -10,8 +10,8 @@ import pytest
 from helpers import ALU
 
 import whiskerid as wi
-from whiskerid._calibrate import GTOL, release_time
-from whiskerid._lsq import gradient_cosine
+from whiskerid.fit._calibrate import GTOL, release_time
+from whiskerid.fit._lsq import gradient_cosine
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "cantilever"
 
@@ -220,7 +220,7 @@ def test_fit_windows_agrees_with_scipy_and_sees_fast_decays():
     for decays over within a tenth of the window (a Hann-window spectrum misses them)."""
     import scipy.optimize
 
-    from whiskerid._calibrate import ZETA_MAX, window_start
+    from whiskerid.fit._calibrate import ZETA_MAX, window_start
 
     rate, m = 200.0, 200
     t = np.arange(m) / rate
@@ -255,7 +255,7 @@ def test_fit_windows_agrees_with_scipy_and_sees_fast_decays():
 
 
 def test_closed_form_adc_average_of_free_columns_equals_the_sampled_average():
-    from whiskerid._calibrate import _averaged, _free_columns, _free_columns_averaged
+    from whiskerid.fit._calibrate import _averaged, _free_columns, _free_columns_averaged
 
     w = wi.paper_record().whisker().with_modes(3)
     t = jnp.sort(jnp.asarray(np.random.default_rng(1).uniform(0, 2, 500)))

@@ -8,15 +8,16 @@ import numpy as np
 import pytest
 
 import whiskerid as wi
-from whiskerid._classify import (
+from whiskerid.classify import _mlp
+from whiskerid.classify._classify import (
     confusion_matrix,
     default_spec,
     format_confusion,
     grouped_split,
     recording_folds,
 )
-from whiskerid._cli import main
-from whiskerid._mlp import TrainConfig, train_mlp
+from whiskerid.classify._mlp import TrainConfig, train_mlp
+from whiskerid.cli._main import main
 
 FAST = TrainConfig(hidden=(32, 16), max_epochs=60, patience=20, batch_size=64)
 
@@ -51,10 +52,10 @@ def test_class_weights_change_nothing_when_balanced_and_lift_a_minority():
     recall = {}
     for b in (True, False):
         res = train_mlp(x, y, x[:0], y[:0], 2, replace(FAST, balance=b), epochs=60)
-        pred = np.argmax(np.asarray(wi._mlp.predict_proba(res.model, x)), axis=1)
+        pred = np.argmax(np.asarray(_mlp.predict_proba(res.model, x)), axis=1)
         recall[b] = np.mean(pred[y == 1] == 1)
     assert recall[True] > recall[False] + 0.2, recall
-    assert TrainConfig().balance and not wi._mlp.PAPER_CONFIG.balance
+    assert TrainConfig().balance and not _mlp.PAPER_CONFIG.balance
 
 
 def test_train_refuses_negative_regularisation_before_reading(tmp_path, capsys):
@@ -79,7 +80,7 @@ def test_full_batch_and_fixed_epoch_refit():
     assert res.val_accuracy > 0.9 and res.best_epoch <= res.epochs <= 400
     refit = train_mlp(x, y, x[:0], y[:0], 3, cfg, epochs=45)
     assert refit.epochs == 60  # rounded up to whole chunks of 20
-    pred = np.argmax(np.asarray(wi._mlp.predict_proba(refit.model, x)), axis=1)
+    pred = np.argmax(np.asarray(_mlp.predict_proba(refit.model, x)), axis=1)
     assert np.mean(pred == y) > 0.9
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import whiskerid as wi
-from whiskerid._features import fit_resonance, power_spectrum
+from whiskerid.classify._features import fit_resonance, power_spectrum
 
 
 def test_spectral_peaks_sub_bin_accuracy_and_order():

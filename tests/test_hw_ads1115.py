@@ -346,7 +346,9 @@ def test_open_bus_opens_the_numbered_bus(monkeypatch):
 def test_hw_imports_no_jax_and_only_light_dependencies():
     allowed = set(sys.stdlib_module_names) | {"numpy", "whiskerid", "smbus2"}
     hw_dir = Path(hw.__file__).parent
-    files = sorted(hw_dir.glob("*.py"))
+    # The online stream loop (_stream.py) runs the classifier and may use JAX; the driver side
+    # (chip, emulator, sampler, recorder) must not.
+    files = sorted(f for f in hw_dir.glob("*.py") if f.name != "_stream.py")
     assert len(files) >= 5
     for path in files:
         for node in ast.walk(ast.parse(path.read_text())):
@@ -359,6 +361,6 @@ def test_hw_imports_no_jax_and_only_light_dependencies():
             for name in names:
                 top = name.split(".")[0]
                 assert top in allowed, f"{path.name} imports {name}"
-                assert name in ("whiskerid._ads1115_spec",) or top != "whiskerid", (
+                assert name in ("whiskerid.io._ads1115_spec",) or top != "whiskerid", (
                     f"{path.name} imports {name}: only the JAX-free spec tables are allowed"
                 )

@@ -9,7 +9,7 @@ from scipy.integrate import simpson
 from scipy.optimize import brentq
 
 import whiskerid as wi
-from whiskerid._modes import modal_mass_ratio
+from whiskerid.model._modes import modal_mass_ratio
 
 
 def _roots_by_scan(mu, n):

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import whiskerid as wi
-from whiskerid import _calibrate as cal
-from whiskerid import _posterior as P
+from whiskerid.fit import _calibrate as cal
+from whiskerid.posterior import _posterior as P
 
 F1, ZETA, NOISE, N = 48.0, 0.02, 0.05, 500
 
@@ -63,7 +63,7 @@ def test_sincos_equals_sin_and_cos(span):
     """The vectorisable sin/cos (posterior's decay columns) vs NumPy to rounding, grad exact."""
     import jax
 
-    from whiskerid._trig import sincos
+    from whiskerid.model._trig import sincos
 
     rng = np.random.default_rng(0)
     x = np.concatenate([rng.uniform(-span, span, 20000), np.arange(-8, 9) * np.pi / 4, [0.0]])
@@ -136,7 +136,7 @@ def test_recovers_truth_and_reports_convergence(prob):
     assert table["provenance"]["seed"] == 0
     import tomllib
 
-    from whiskerid._record import record_from_dict
+    from whiskerid.model._record import record_from_dict
 
     again = record_from_dict(tomllib.loads(post.record.to_toml()))
     assert again.extra["posterior"]["converged"] == d["converged"]
@@ -191,7 +191,7 @@ def test_student_t_samples_the_nuisances():
 
 
 def test_cli_calibrate_then_posterior(tmp_path, capsys):
-    from whiskerid._cli import main
+    from whiskerid.cli._main import main
 
     o = decay(5)
     csv = tmp_path / "decay.csv"

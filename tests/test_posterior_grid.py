@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 import whiskerid as wi
-from whiskerid import _calibrate as cal
-from whiskerid import _posterior as P
+from whiskerid.fit import _calibrate as cal
+from whiskerid.posterior import _posterior as P
 
 F1, ZETA, NOISE, N = 48.0, 0.02, 0.05, 500
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import whiskerid as wi
-from whiskerid._classify import (
+from whiskerid.classify._classify import (
     _speed,
     check_speed,
     confusion_matrix,
@@ -15,7 +15,8 @@ from whiskerid._classify import (
     scores,
     windows_of,
 )
-from whiskerid._features import FeatureSpec, compute_features
+from whiskerid.classify._features import FeatureSpec, compute_features
+from whiskerid.classify._mlp import TrainConfig
 
 
 def _rec(path, *, rate=200.0, seconds=4.0, f=20.0, scale=1.0, meta=None, columns=("adc",)):
@@ -85,7 +86,7 @@ def test_channels_are_named_and_kept(tmp_path):
     ws = load_dataset(root)
     assert ws.channel == "az"
     model = wi.train_classifier(ws, features="paper",
-                                config=wi._mlp.TrainConfig(hidden=(8,), max_epochs=20))  # fmt: skip
+                                config=TrainConfig(hidden=(8,), max_epochs=20))  # fmt: skip
     assert model.channel == "az"
     other = wi.read_recording(_rec(tmp_path / "other.csv", columns=("ax", "ay")))
     with pytest.raises(wi.RecordingError, match="no column 'az', the one the model"):

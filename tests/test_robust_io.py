@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 import whiskerid as wi
-from whiskerid._calibrate import _poor_fit_warnings
-from whiskerid._cli import json_safe, main
-from whiskerid._terrain import RunSpec, dataset_paths, speed_tag, synthesize_dataset
+from whiskerid.cli._main import json_safe, main
+from whiskerid.fit._calibrate import _poor_fit_warnings
+from whiskerid.terrain._terrain import RunSpec, dataset_paths, speed_tag, synthesize_dataset
 
 T = np.round(np.arange(12) / 200.0, 6)
 X = np.arange(12) * 3 - 7
@@ -172,7 +172,7 @@ def test_json_safe_replaces_every_non_finite_float_by_null():
 
 
 def test_cli_json_is_standard_json(tmp_path, capsys, monkeypatch):
-    import whiskerid._cli as cli
+    import whiskerid.cli._main as cli
 
     monkeypatch.setattr(
         cli, "_cmd_simulate", lambda args: {"x": np.float64(np.nan), "y": [-np.inf]}

@@ -10,11 +10,11 @@ import time
 
 import numpy as np
 import pytest
+from whiskerid.hw._stream import BackgroundClassifier, OnlineClassifier, run_stream
 
 import whiskerid as wi
 from whiskerid import hw
-from whiskerid._cli import main
-from whiskerid._stream import BackgroundClassifier, OnlineClassifier, run_stream
+from whiskerid.cli._main import main
 
 
 class ThresholdModel:
@@ -254,7 +254,7 @@ def test_kill_9_mid_run_leaves_a_readable_recording(tiny_model, tmp_path):
     cmd = [
         sys.executable,
         "-m",
-        "whiskerid._cli",
+        "whiskerid.cli._main",
         "stream",
         "--model",
         str(tiny_model),

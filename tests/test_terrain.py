@@ -3,7 +3,7 @@
 import numpy as np
 
 import whiskerid as wi
-from whiskerid._terrain import RunSpec, base_acceleration, iso8608_roughness
+from whiskerid.terrain._terrain import RunSpec, base_acceleration, iso8608_roughness
 
 
 def test_synthesis_is_deterministic_by_seed_and_independent_of_the_batch():

@@ -54,12 +54,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import _calibrate as _cal
-from . import _lsq
-from ._calibrate import ZETA_MAX, Observation, sha256_of
-from ._modes import cantilever_roots
-from ._record import WhiskerRecord
-from ._trig import sincos
+from ..fit import _calibrate as _cal
+from ..fit import _lsq as _lsq
+from ..fit._calibrate import ZETA_MAX, Observation, sha256_of
+from ..model._modes import cantilever_roots
+from ..model._record import WhiskerRecord
+from ..model._trig import sincos
 
 LIKELIHOODS = ("gaussian", "student")
 #: emcee moves ``run_sampler`` accepts (see :func:`emcee_moves`).
@@ -1132,7 +1132,7 @@ def summarize(prob: Problem, sampler, *, seed: int | None = None) -> Posterior:
 def _provenance(prob, walkers, seed, move):
     import emcee
 
-    from . import __version__
+    from .._version import __version__
 
     files = []
     for o in prob.observations:

@@ -21,7 +21,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ._custom_types import PerMode, Scalar
+from .._custom_types import PerMode, Scalar
 from ._modes import cantilever_roots
 
 

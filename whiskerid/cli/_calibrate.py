@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._calibrate import (
+from ..fit._calibrate import (
     EXCITATIONS,
     G0,
     OBSERVABLES,
@@ -16,9 +16,9 @@ from ._calibrate import (
     read_static_test,
     release_time,
 )
-from ._io import RecordingError, check_out_path, read_recording
-from ._lsq import SOLVERS
-from ._record import load_record
+from ..fit._lsq import SOLVERS
+from ..io._recording import RecordingError, check_out_path, read_recording
+from ..model._record import load_record
 
 
 def add_calibrate(sub, command_error) -> None:
@@ -143,7 +143,7 @@ def _check_sampling(rec, record) -> None:
     """Refuse ``rate_hz`` metadata at odds with the timestamps, and sampling far too slow
     for the whisker's first mode (a time column in ms read as seconds is 1000 times too
     slow): a fit to either would end with numbers, all of them wrong."""
-    from ._classify import recording_rate, timestamp_rate
+    from ..classify._classify import recording_rate, timestamp_rate
 
     recording_rate(rec)
     rate = timestamp_rate(rec.t)
@@ -198,7 +198,7 @@ def load_observation(path: Path, record, args) -> Observation:
     if args.fit_gain:
         gain = None
     if gain is not None and observable in ("voltage", "adc"):
-        from ._calibrate import _nominal_gain
+        from ..fit._calibrate import _nominal_gain
 
         gain = _nominal_gain(record, observable)
     obs = Observation(
@@ -265,7 +265,7 @@ def _cmd_calibrate(args, command_error) -> dict:
     print(f"wrote {args.out}", file=sys.stderr)
     out = {**cal.to_json(), "out": str(args.out)}
     if args.plot:
-        from ._calibrate_plot import plot_calibration
+        from ..plot._calibrate import plot_calibration
 
         plot_calibration(args.plot, cal)
         out["plot"] = str(args.plot)

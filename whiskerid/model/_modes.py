@@ -29,7 +29,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._custom_types import PerMode, Scalar
+from .._custom_types import PerMode, Scalar
 
 #: The paper's printed constants (roots of 1 + cos D cosh D = 0, rounded as printed).
 PAPER_D = (1.8751, 4.6941, 7.8548, 10.9955, 14.137)

@@ -60,9 +60,9 @@ def add_stream(sub, command_error) -> None:
 
 
 def _cmd_stream(args, command_error) -> dict:
-    from . import hw
-    from ._classify import ClassifierModel
-    from ._stream import OnlineClassifier, open_recorder, run_stream, terrain_source
+    from .. import hw
+    from ..classify._classify import ClassifierModel
+    from ..hw._stream import OnlineClassifier, open_recorder, run_stream, terrain_source
 
     _check_numbers(args, command_error)
     if args.fast and args.simulate is None:
@@ -74,7 +74,7 @@ def _cmd_stream(args, command_error) -> dict:
     clock = hw.FakeClock() if args.fast else None
     timing = {} if clock is None else {"clock": clock.now_ns, "sleep": clock.sleep}
     if args.simulate is not None:
-        from ._record import load_record, paper_record
+        from ..model._record import load_record, paper_record
 
         record = paper_record() if args.whisker is None else load_record(args.whisker)
         horizon = 600.0 if args.duration is None else args.duration + 2.0

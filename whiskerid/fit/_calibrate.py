@@ -55,12 +55,12 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from . import _lsq
-from ._io import RecordingError, check_samples
-from ._record import WhiskerRecord
-from ._response import base_motion_response, harmonic_steady_state, observe
+from ..io._recording import RecordingError, check_samples
+from ..model._record import WhiskerRecord
+from ..model._response import base_motion_response, harmonic_steady_state, observe
+from ..model._whisker import CoilSpring, UniformBeam, Whisker
+from . import _lsq as _lsq
 from ._signal import amplitude_spectrum, find_peaks, resample_uniform
-from ._whisker import CoilSpring, UniformBeam, Whisker
 
 OBSERVABLES = ("deflection", "acceleration", "voltage", "adc")
 EXCITATIONS = ("decay", "sine", "base")
@@ -185,7 +185,7 @@ class StaticTest:
 
 def read_static_test(path: str | Path) -> StaticTest:
     """Read a static test CSV with columns ``force_n`` and ``deflection_m`` (optional ``x_m``)."""
-    from ._io import read_csv_table
+    from ..io._recording import read_csv_table
 
     path = Path(path)
     if not path.exists():
@@ -1023,7 +1023,7 @@ def _per_recording(problem, unravel, flat, args, obs):
 def _updated_record(record, cal: Calibration, pin, static, obs, problem):
     from dataclasses import replace
 
-    from . import __version__
+    from .._version import __version__
 
     p = cal.params
     n = problem.n_modes

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io._recording import RecordingError
 from ._classify import WindowSet, cut_windows
-from ._io import RecordingError
 
 DEFAULT_ROOT = Path(__file__).resolve().parent.parent.parent / "shared" / "data" / "borealtc"
 IMU_CHANNELS = ("wx", "wy", "wz", "ax", "ay", "az")

@@ -24,7 +24,7 @@ which overflow float64 for the fifth mode after about a second; their product is
 
 import jax.numpy as jnp
 
-from ._custom_types import Samples, ScalarLike, Times
+from .._custom_types import Samples, ScalarLike, Times
 from ._modes import PAPER_D
 from ._whisker import Whisker
 

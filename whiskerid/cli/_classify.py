@@ -5,8 +5,8 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from ._features import FEATURE_KINDS
-from ._io import check_out_path
+from ..classify._features import FEATURE_KINDS
+from ..io._recording import check_out_path
 
 _FMT = argparse.ArgumentDefaultsHelpFormatter
 
@@ -44,7 +44,7 @@ def add_classify_commands(sub, command_error) -> None:
         ),
         formatter_class=_FMT,
     )
-    from ._terrain import SPEEDS_MPS, TERRAINS
+    from ..terrain._terrain import SPEEDS_MPS, TERRAINS
 
     s.add_argument("--out", type=Path, required=True, help="dataset folder to write")
     s.add_argument("--whisker", type=Path, help="whisker record (TOML); the paper's by default")
@@ -157,8 +157,8 @@ def add_classify_commands(sub, command_error) -> None:
 
 
 def _cmd_synth(args) -> dict:
-    from ._record import load_record, paper_record
-    from ._terrain import synthesize_dataset
+    from ..model._record import load_record, paper_record
+    from ..terrain._terrain import synthesize_dataset
 
     if args.runs < 1 or args.duration <= 0:
         raise CommandError("--runs must be >= 1 and --duration > 0")
@@ -172,8 +172,8 @@ def _cmd_synth(args) -> dict:
 
 
 def _cmd_train(args) -> dict:
-    from ._classify import cross_validate, load_dataset, train_classifier
-    from ._mlp import default_config
+    from ..classify._classify import cross_validate, load_dataset, train_classifier
+    from ..classify._mlp import default_config
 
     if args.window <= 0:
         raise CommandError("--window must be positive")
@@ -234,7 +234,7 @@ def _cmd_train(args) -> dict:
 
 
 def _load_model(path, context_s=None):
-    from ._classify import ClassifierModel
+    from ..classify._classify import ClassifierModel
 
     model = ClassifierModel.load(path)
     if context_s is not None:
@@ -243,7 +243,7 @@ def _load_model(path, context_s=None):
 
 
 def _cmd_evaluate(args) -> dict:
-    from ._classify import evaluate, format_confusion, load_dataset, plot_confusion
+    from ..classify._classify import evaluate, format_confusion, load_dataset, plot_confusion
 
     if args.plot is not None:  # before any work
         check_out_path(args.plot, "--plot", inputs={"MODEL": args.model, "DATASET": args.dataset})
@@ -272,7 +272,7 @@ def _cmd_evaluate(args) -> dict:
 
 
 def _cmd_classify(args) -> dict:
-    from ._io import read_recording
+    from ..io._recording import read_recording
 
     if args.plot is not None:  # before any work
         check_out_path(args.plot, "--plot", inputs={"MODEL": args.model, "REC": args.recording})
@@ -286,7 +286,7 @@ def _cmd_classify(args) -> dict:
          f"{len(res['windows'])} windows)")  # fmt: skip
     out = {"recording": str(args.recording), **res}
     if args.plot is not None:
-        from ._plot import plot_recording_labels
+        from ..plot._plot import plot_recording_labels
 
         x = rec.columns[res["channel"]]  # checked by classify_recording
         title = f"{args.recording.name}: {res['label']} (mean probability {res['confidence']:.2f})"

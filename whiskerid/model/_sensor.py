@@ -16,8 +16,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import _ads1115_spec as spec
-from ._custom_types import Codes, Samples, Scalar, Times
+from .._custom_types import Codes, Samples, Scalar, Times
+from ..io import _ads1115_spec as spec
 
 
 def _scalar(x) -> jax.Array:

@@ -6,11 +6,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ._calibrate import PINS, read_static_test
-from ._calibrate_cli import add_data_options, check_data_options, load_observation
-from ._io import same_file
-from ._posterior import LIKELIHOODS, MOVES, sample_posterior
-from ._record import load_record
+from ..fit._calibrate import PINS, read_static_test
+from ..io._recording import same_file
+from ..model._record import load_record
+from ..posterior._posterior import LIKELIHOODS, MOVES, sample_posterior
+from ._calibrate import add_data_options, check_data_options, load_observation
 
 
 def add_posterior(sub, command_error) -> None:
@@ -104,7 +104,7 @@ def _cmd_posterior(args, command_error) -> dict:
     print(f"acceptance {d['acceptance']:.3f}; {d['message']}", file=sys.stderr)
     out = {**post.to_json(), "out": str(out_toml), "chain": str(chain)}
     if not args.no_plots:
-        from ._posterior_plot import plot_corner, plot_trace
+        from ..plot._posterior import plot_corner, plot_trace
 
         out["corner"] = str(plot_corner(args.out / "corner.png", post))
         out["trace"] = str(plot_trace(args.out / "trace.png", post))

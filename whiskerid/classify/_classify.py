@@ -30,9 +30,9 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm import tqdm
 
-from . import __version__
+from .._version import __version__
+from ..io._recording import Recording, RecordingError, check_samples, read_recording
 from ._features import FeatureSpec, compute_features, window_features
-from ._io import Recording, RecordingError, check_samples, read_recording
 from ._mlp import MLP, TrainConfig, default_config, from_arrays, to_arrays, train_mlp
 
 MODEL_FORMAT = "whiskerid.classifier/2"  # /2: spectral-shape and envelope features
@@ -1094,7 +1094,7 @@ def format_confusion(conf, labels) -> str:
 
 def plot_confusion(path: str | Path, conf, labels, *, title: str = "") -> Path:
     """Save the row-normalised confusion matrix as a PNG (matplotlib, Agg)."""
-    from ._plot import _pyplot, _save
+    from ..plot._plot import _pyplot, _save
 
     plt = _pyplot()
     conf = np.asarray(conf, dtype=float)

@@ -4,8 +4,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..fit._signal import amplitude_spectrum, resample_uniform
 from ._plot import _pyplot, _save
-from ._signal import amplitude_spectrum, resample_uniform
 
 
 def plot_calibration(path: str | Path, cal) -> Path:

@@ -139,7 +139,7 @@ class OnlineClassifier:
 
     def classify(self, pending: PendingWindow) -> WindowLabel:
         """Run the model on a cut window (features + MLP) and fuse its context."""
-        from ._classify import fuse_context
+        from ..classify._classify import fuse_context
 
         p = self.model.window_proba(pending.samples, self.speed)
         lookback = getattr(self.model, "lookback_s", 0.0)
@@ -371,10 +371,10 @@ def terrain_source(record, terrain: str, speed_mps: float, duration_s: float, *,
     """
     import jax.numpy as jnp
 
-    from ._response import base_motion_response, observe
-    from ._sensor import HallSensor
-    from ._terrain import base_acceleration
-    from .hw import source_from_recording
+    from ..model._response import base_motion_response, observe
+    from ..model._sensor import HallSensor
+    from ..terrain._terrain import base_acceleration
+    from ._emulator import source_from_recording
 
     rng = np.random.default_rng([seed, 7919])
     t, acc = base_acceleration(terrain, speed_mps, duration_s + 1.0, rng)
@@ -392,7 +392,7 @@ def open_recorder(path: Path | None, *, rate_hz: float, meta: dict):
     """A crash-safe CSV recorder of ADC codes, or None; never overwrites (``-1``, ``-2``...)."""
     if path is None:
         return None
-    from .hw import Recorder, unique_path
+    from ._recorder import Recorder, unique_path
 
     return Recorder(unique_path(path), columns=("adc",), rate_hz=rate_hz, units="code",
                     metadata=meta)  # fmt: skip

@@ -14,10 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__
-from ._io import RecordingError, check_out_path, read_recording, write_csv
-from ._record import RecordError, load_record, paper_record
-from ._simulate import EXCITATIONS, MODELS, SIM_OBSERVABLES, UNITS, BaseMotion, simulate
+from .._version import __version__
+from ..io._recording import RecordingError, check_out_path, read_recording, write_csv
+from ..model._record import RecordError, load_record, paper_record
+from ..model._simulate import EXCITATIONS, MODELS, SIM_OBSERVABLES, UNITS, BaseMotion, simulate
 
 # Reported on one line with exit status 2. The readers turn corrupt archives into
 # RecordingErrors with the path; BadZipFile, EOFError and MemoryError are a safety net.
@@ -131,8 +131,8 @@ def _cmd_simulate(args) -> dict:
         if args.base is None:
             raise CommandError("--excitation base needs --base FILE (time and base acceleration)")
         rec = read_recording(args.base)
-        from ._classify import recording_rate
-        from ._io import check_samples
+        from ..classify._classify import recording_rate
+        from ..io._recording import check_samples
 
         acc = rec.signal(args.base_col)
         check_samples(rec.t, acc, where=str(args.base))
@@ -166,7 +166,7 @@ def _cmd_simulate(args) -> dict:
         "dominant_peaks_hz": _peaks(sim.t, x),
     }
     if args.plot:
-        from ._plot import plot_signal_and_spectrum
+        from ..plot._plot import plot_signal_and_spectrum
 
         plot_signal_and_spectrum(
             args.plot,
@@ -181,7 +181,7 @@ def _cmd_simulate(args) -> dict:
 
 
 def _peaks(t, x, n: int = 3) -> list[float]:
-    from ._signal import dominant_peaks
+    from ..fit._signal import dominant_peaks
 
     return [round(p.frequency_hz, 3) for p in dominant_peaks(t, x, n=n)]
 
@@ -232,16 +232,16 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _add_demo(sub)
     _add_simulate(sub)
-    from ._calibrate_cli import add_calibrate
+    from ._calibrate import add_calibrate
 
     add_calibrate(sub, CommandError)
-    from ._posterior_cli import add_posterior
+    from ._posterior import add_posterior
 
     add_posterior(sub, CommandError)
-    from ._classify_cli import add_classify_commands
+    from ._classify import add_classify_commands
 
     add_classify_commands(sub, CommandError)
-    from ._stream_cli import add_stream
+    from ._stream import add_stream
 
     add_stream(sub, CommandError)
     return parser

@@ -79,10 +79,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._io import Recording, write_csv
-from ._record import WhiskerRecord, paper_record
-from ._response import base_motion_response, observe
-from ._sensor import HallSensor
+from ..io._recording import Recording, write_csv
+from ..model._record import WhiskerRecord, paper_record
+from ..model._response import base_motion_response, observe
+from ..model._sensor import HallSensor
 
 SPEEDS_MPS = (0.10, 0.15, 0.20, 0.25, 0.30)
 WHEEL_RADIUS_M = 0.035

@@ -47,7 +47,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ._lsq import least_squares, to_interval
+from ..fit._lsq import least_squares, to_interval
 
 FeatureKind = Literal["fitted", "paper"]
 FEATURE_KINDS = ("fitted", "paper")

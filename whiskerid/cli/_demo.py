@@ -18,12 +18,12 @@ from pathlib import Path
 import jax.numpy as jnp
 import numpy as np
 
-from ._io import write_csv
-from ._paper import paper_eq1
-from ._record import paper_record
-from ._response import harmonic_steady_state, observe
-from ._signal import dominant_peaks
-from ._simulate import simulate
+from ..fit._signal import dominant_peaks
+from ..io._recording import write_csv
+from ..model._paper import paper_eq1
+from ..model._record import paper_record
+from ..model._response import harmonic_steady_state, observe
+from ..model._simulate import simulate
 
 MODAL_CASES = [(hb, fb) for fb in (100.0, 300.0) for hb in (1e-4, 3e-4)]
 
@@ -80,7 +80,7 @@ def run_demo(out: Path, *, plots: bool = True, say=print) -> dict:
             f"Hz folds to {abs(f_n[1] - 200 * round(f_n[1] / 200)):.1f} Hz at 200 Hz)"
         )
         if plots:
-            from ._plot import plot_signal_and_spectrum
+            from ..plot._plot import plot_signal_and_spectrum
 
             png = plot_signal_and_spectrum(
                 out / f"{label}_adc.png",
@@ -101,7 +101,7 @@ def run_demo(out: Path, *, plots: bool = True, say=print) -> dict:
         "recordings": recordings,
     }
     if plots:
-        from ._plot import plot_modal_analysis
+        from ..plot._plot import plot_modal_analysis
 
         for name, rows in cases.items():
             png = plot_modal_analysis(out / f"modal_analysis_{name}.png", rows)
@@ -118,7 +118,7 @@ def _calibration_stage(out: Path, record, *, plots: bool, say) -> dict:
     """Simulate a pluck as the Pi records it and calibrate the whisker from it (f_1, ζ, EI)."""
     from dataclasses import replace
 
-    from ._calibrate import Observation, calibrate
+    from ..fit._calibrate import Observation, calibrate
 
     say("[4] calibration: a pluck recorded by the ADS1115 at 200 Hz (10 s, SNR 30 dB), fitted")
     say("    from a nominal record 30 % off (start values from the data)")
@@ -154,7 +154,7 @@ def _calibration_stage(out: Path, record, *, plots: bool, say) -> dict:
         **{k: {"value": v["value"], "std": v["std"]} for k, v in p.items()},
     }
     if plots:
-        from ._calibrate_plot import plot_calibration
+        from ..plot._calibrate import plot_calibration
 
         summary["png"] = str(plot_calibration(out / "calibration.png", cal))
     return summary, (cal.record, obs)
@@ -162,7 +162,7 @@ def _calibration_stage(out: Path, record, *, plots: bool, say) -> dict:
 
 def _posterior_stage(out: Path, record, obs, *, plots: bool, say) -> dict:
     """emcee posterior of the calibrated pluck's ζ and f_1 (a short, converged run)."""
-    from ._posterior import sample_posterior
+    from ..posterior._posterior import sample_posterior
 
     say("[5] posterior of zeta with emcee: the calibrated pluck, 32 walkers x 1000 steps")
     # 1000 steps: tau is about 11 steps here with the default (differential-evolution)
@@ -188,7 +188,7 @@ def _posterior_stage(out: Path, record, obs, *, plots: bool, say) -> dict:
         "record": str(path),
     }
     if plots:
-        from ._posterior_plot import plot_corner, plot_trace
+        from ..plot._posterior import plot_corner, plot_trace
 
         summary["corner_png"] = str(plot_corner(out / "posterior_corner.png", post))
         summary["trace_png"] = str(plot_trace(out / "posterior_trace.png", post))
@@ -198,9 +198,9 @@ def _posterior_stage(out: Path, record, obs, *, plots: bool, say) -> dict:
 
 def _stream_stage(out: Path, model_dir: Path, *, say, terrain: str = "brick") -> dict:
     """10 s of the Pi's loop on an emulated ADS1115 (virtual clock): sample, classify, record."""
-    from . import hw
-    from ._classify import ClassifierModel
-    from ._stream import OnlineClassifier, open_recorder, run_stream, terrain_source
+    from .. import hw
+    from ..classify._classify import ClassifierModel
+    from ..hw._stream import OnlineClassifier, open_recorder, run_stream, terrain_source
 
     say(f"[7] online stream: emulated ADS1115 fed by the simulator on {terrain} at 0.2 m/s, 10 s")
     clock = hw.FakeClock()
@@ -225,7 +225,7 @@ def _stream_stage(out: Path, model_dir: Path, *, say, terrain: str = "brick") ->
 
 def _classification_stage(out: Path, *, plots: bool, say) -> dict:
     """Small synthetic terrain dataset (7 terrains, 0.2 m/s), trained and tested by recording."""
-    from ._classify import (
+    from ..classify._classify import (
         evaluate,
         format_confusion,
         load_dataset,
@@ -233,7 +233,7 @@ def _classification_stage(out: Path, *, plots: bool, say) -> dict:
         split_by_recording,
         train_classifier,
     )
-    from ._terrain import synthesize_dataset
+    from ..terrain._terrain import synthesize_dataset
 
     say("[6] terrain classification: 7 simulated terrains at 0.2 m/s, 16 runs x 6 s each")
     # Many short runs rather than a few long ones: what the network needs to see is the

@@ -21,7 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._io import Recording
+from ..io._recording import Recording
 from ._paper import paper_eq1
 from ._record import WhiskerRecord
 from ._response import (

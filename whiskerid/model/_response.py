@@ -35,7 +35,7 @@ from typing import Literal, NamedTuple
 import jax
 import jax.numpy as jnp
 
-from ._custom_types import ModalSeries, PerMode, Samples, ScalarLike, Times
+from .._custom_types import ModalSeries, PerMode, Samples, ScalarLike, Times
 from ._modes import mode_shape, participation_factors, project_shape
 from ._whisker import Whisker
 

@@ -1,0 +1,3 @@
+"""The ``whiskerid`` command line: one module per command, parsing and printing only."""
+
+from ._main import main as main

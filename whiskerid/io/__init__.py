@@ -1,0 +1,10 @@
+"""Recordings on disk (CSV, NPZ, NPY), provenance, and the ADS1115's datasheet facts.
+
+No JAX here: the Raspberry Pi side reads and writes through this package.
+"""
+
+from ._recording import Recording as Recording
+from ._recording import RecordingError as RecordingError
+from ._recording import check_samples as check_samples
+from ._recording import read_recording as read_recording
+from ._recording import write_csv as write_csv

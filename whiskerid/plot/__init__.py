@@ -1,0 +1,1 @@
+"""Figures (matplotlib, saved as PNG): signals, spectra, calibrations, posteriors, classifiers."""
