@@ -47,10 +47,10 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from .._choices import FEATURE_KINDS
 from ..fit._lsq import least_squares, to_interval
 
 FeatureKind = Literal["fitted", "paper"]
-FEATURE_KINDS = ("fitted", "paper")
 _EPS = 1e-12
 
 

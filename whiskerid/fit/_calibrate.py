@@ -55,6 +55,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._choices import EXCITATIONS, OBSERVABLES, PINS
 from ..io._recording import RecordingError, check_samples
 from ..model._record import WhiskerRecord
 from ..model._response import base_motion_response, harmonic_steady_state, observe
@@ -62,9 +63,6 @@ from ..model._whisker import CoilSpring, UniformBeam, Whisker
 from . import _lsq as _lsq
 from ._signal import amplitude_spectrum, find_peaks, resample_uniform
 
-OBSERVABLES = ("deflection", "acceleration", "voltage", "adc")
-EXCITATIONS = ("decay", "sine", "base")
-PINS = ("auto", "geometry", "material")
 ZETA_MAX = 0.95
 # fit_windows: converged when |cos(residuals, each Jacobian column)| < this (MINPACK gtol).
 WINDOW_GTOL = 1e-4

@@ -13,7 +13,7 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
-SOLVERS = ("levenberg-marquardt", "dogleg", "gauss-newton")
+from .._choices import SOLVERS
 
 
 def make_solver(name: str = "levenberg-marquardt", *, rtol: float = 1e-10, atol: float = 1e-12):

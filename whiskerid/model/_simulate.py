@@ -21,6 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._choices import EXCITATIONS, MODELS, OBSERVABLES, UNITS
 from ..io._recording import Recording
 from ._paper import paper_eq1
 from ._record import WhiskerRecord
@@ -36,10 +37,7 @@ from ._response import (
 Model = Literal["paper", "steady", "exact"]
 Excitation = Literal["sine", "decay", "base"]
 SimObservable = Literal["deflection", "acceleration", "voltage", "adc"]
-MODELS = ("paper", "steady", "exact")
-EXCITATIONS = ("sine", "decay", "base")
-SIM_OBSERVABLES = ("deflection", "acceleration", "voltage", "adc")
-UNITS = {"deflection": "m", "acceleration": "m/s^2", "voltage": "V", "adc": "code"}
+SIM_OBSERVABLES = OBSERVABLES
 
 
 @dataclass(frozen=True)

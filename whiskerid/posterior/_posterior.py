@@ -54,6 +54,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._choices import LIKELIHOODS, MOVES
 from ..fit import _calibrate as _cal
 from ..fit import _lsq as _lsq
 from ..fit._calibrate import ZETA_MAX, Observation, sha256_of
@@ -61,9 +62,7 @@ from ..model._modes import cantilever_roots
 from ..model._record import WhiskerRecord
 from ..model._trig import sincos
 
-LIKELIHOODS = ("gaussian", "student")
 #: emcee moves ``run_sampler`` accepts (see :func:`emcee_moves`).
-MOVES = ("de", "stretch", "de-snooker")
 DISTS = ("uniform", "loguniform", "normal", "lognormal")
 PRIOR_KEYS = ("zeta", "f1_hz", "kappa", "sigma_rel")
 _DIST_ARGS = {
