@@ -16,7 +16,7 @@ import numpy as np
 from ..io._recording import RecordingError
 from ._classify import WindowSet, cut_windows
 
-DEFAULT_ROOT = Path(__file__).resolve().parent.parent.parent / "shared" / "data" / "borealtc"
+DEFAULT_ROOT = Path(__file__).resolve().parents[3] / "shared" / "data" / "borealtc"
 IMU_CHANNELS = ("wx", "wy", "wz", "ax", "ay", "az")
 
 
