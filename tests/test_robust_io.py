@@ -13,7 +13,8 @@ import pytest
 import whiskerid as wi
 from whiskerid.cli._main import json_safe, main
 from whiskerid.fit._calibrate import _poor_fit_warnings
-from whiskerid.terrain._terrain import RunSpec, dataset_paths, speed_tag, synthesize_dataset
+from whiskerid.io import TornRecordingWarning
+from whiskerid.terrain import RunSpec, dataset_paths, speed_tag, synthesize_dataset
 
 T = np.round(np.arange(12) / 200.0, 6)
 X = np.arange(12) * 3 - 7
@@ -101,6 +102,28 @@ def test_bad_csv_is_refused_with_file_line_and_column(tmp_path, case):
     with pytest.raises(wi.RecordingError) as info:
         wi.read_recording(path)
     assert str(info.value).startswith(str(path)) and message in str(info.value)
+
+
+TORN_TAILS = {
+    # What follows the 12 complete rows, without a newline; the rows read back.
+    "short row": ("0.06", 12),
+    "row cut after the delimiter": ("0.06,", 12),
+    "row cut mid-exponent": ("0.06,1e", 12),
+    "complete row (a hand-edited file)": ("0.06,29", 13),
+}
+
+
+@pytest.mark.parametrize("case", TORN_TAILS)
+def test_a_torn_last_row_is_dropped_with_a_warning_a_complete_one_kept(tmp_path, case):
+    tail, rows = TORN_TAILS[case]
+    path = _write(tmp_path / "r.csv", "\n".join(["t,adc", *_rows(), tail]))
+    if rows == 12:
+        with pytest.warns(TornRecordingWarning, match=r"r\.csv line 14: dropped the torn last"):
+            rec = wi.read_recording(path)
+    else:
+        rec = wi.read_recording(path)  # no warning: filterwarnings = error
+    assert rec.t.size == rows
+    np.testing.assert_array_equal(rec.signal()[:12], X)
 
 
 def test_a_recording_without_signal_columns_has_no_signal():
