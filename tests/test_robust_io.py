@@ -390,9 +390,11 @@ def test_poor_fit_warning_names_the_recording_below_3_db():
 def test_calibrating_a_recording_timed_in_ms_is_refused(tmp_path, capsys):
     """With rate_hz metadata the timestamps contradict it; without, the sampling is far
     too slow for the whisker's first mode. Either way nothing is fitted or written."""
-    sim = wi.simulate(wi.paper_record(), excitation="decay", rate_hz=200.0, duration_s=3.0,
-                      noise_db=30.0, seed=1)  # fmt: skip
-    sim.t = sim.t * 1000.0  # milliseconds where seconds are expected
+    t_s = np.arange(600) / 200.0  # 3 s at 200 Hz of a decaying 30 Hz deflection, with noise
+    rng = np.random.default_rng(1)
+    w = 1e-5 * np.exp(-2.0 * t_s) * np.cos(2 * np.pi * 30.0 * t_s) + 3e-7 * rng.normal(size=600)
+    sim = wi.Recording(t=t_s * 1000.0, columns={"deflection": w},  # ms where s are expected
+                       meta={"rate_hz": "200", "units": "m"})  # fmt: skip
     whisker = wi.paper_record().save(tmp_path / "w.toml")
     out = tmp_path / "cal.toml"
     assert "rate_hz" in sim.meta
