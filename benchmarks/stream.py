@@ -76,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
 
     online = worker = None
     if args.model:
-        from whiskerid.hw._stream import BackgroundClassifier, OnlineClassifier, terrain_source
+        from whiskerid.hw import BackgroundClassifier, OnlineClassifier, terrain_source
 
         from whiskerid import ClassifierModel, paper_record
 

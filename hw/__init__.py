@@ -1,8 +1,17 @@
-"""Raspberry Pi side of whiskerid: ADS1115 driver, emulator, fixed-rate sampler, recorder.
+"""Raspberry Pi side of whiskerid: ADS1115 driver, emulator, fixed-rate sampler, recorder,
+and the online stream loop.
 
-Light on purpose (numpy and, on the Pi, smbus2; no JAX), so it starts fast on a small board.
+The driver side is light on purpose (numpy and, on the Pi, smbus2; no JAX), so it starts fast
+on a small board. The stream loop (``OnlineClassifier``, ``BackgroundClassifier``,
+``run_stream``, ``terrain_source``, ``open_recorder``, ...) runs the classifier and the
+terrain simulator, which need JAX: its names load on first use, so ``import whiskerid.hw``
+does not start JAX.
 See ``hw/README.md`` for wiring and setup.
 """
+
+from typing import TYPE_CHECKING
+
+from whiskerid.io import TornRecordingWarning as TornRecordingWarning
 
 from ._ads1115 import ADS1115 as ADS1115
 from ._ads1115 import DEFAULT_CONFIG as DEFAULT_CONFIG
@@ -28,3 +37,38 @@ from ._recorder import unique_path as unique_path
 from ._sampler import Sample as Sample
 from ._sampler import Sampler as Sampler
 from ._sampler import SamplerStats as SamplerStats
+
+# The stream loop's public names, loaded on first use (PEP 562): they bring in JAX.
+_STREAM_NAMES = (
+    "BackgroundClassifier",
+    "OnlineClassifier",
+    "PendingWindow",
+    "StreamSummary",
+    "WindowLabel",
+    "open_recorder",
+    "run_stream",
+    "terrain_source",
+)
+
+
+def __getattr__(name: str):
+    if name in _STREAM_NAMES:
+        from . import _stream
+
+        return getattr(_stream, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_STREAM_NAMES))
+
+
+if TYPE_CHECKING:
+    from ._stream import BackgroundClassifier as BackgroundClassifier
+    from ._stream import OnlineClassifier as OnlineClassifier
+    from ._stream import PendingWindow as PendingWindow
+    from ._stream import StreamSummary as StreamSummary
+    from ._stream import WindowLabel as WindowLabel
+    from ._stream import open_recorder as open_recorder
+    from ._stream import run_stream as run_stream
+    from ._stream import terrain_source as terrain_source

@@ -10,12 +10,14 @@ from __future__ import annotations
 
 import collections
 import math
+import os
 import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 
+from whiskerid.io import Recording, read_recording
 from whiskerid.io._ads1115_spec import (
     CONFIG_POWER_ON,
     DATA_RATE_SPS,
@@ -90,19 +92,31 @@ class FakeClock:
 
 
 def source_from_recording(
-    t: Sequence[float] | np.ndarray, v: Sequence[float] | np.ndarray, *, periodic: bool = False
+    t: Sequence[float] | np.ndarray | str | os.PathLike[str] | Recording,
+    v: Sequence[float] | np.ndarray | None = None,
+    *,
+    column: str | None = None,
+    periodic: bool = False,
 ) -> Source:
     """Make a signal source that linearly interpolates a recording.
 
     Args:
-        t: Sample times in seconds, strictly increasing (need not be uniform).
+        t: Sample times in seconds, strictly increasing (need not be uniform); or a recording
+            in volts (a :class:`whiskerid.io.Recording`, or a file that
+            :func:`whiskerid.io.read_recording` reads), with ``v`` left out.
         v: Values in volts at those times.
+        column: The recording's signal column (the first by default).
         periodic: If True, repeat the recording with period ``t[-1] - t[0]`` (to stream a short
             recording for a long time); otherwise hold the end values outside it.
 
     Returns:
         ``source(t_s) -> volts`` accepting a float or an array of times.
+
+    Raises:
+        ValueError: Bad times or values, or a recording whose units are ADC codes.
     """
+    if v is None:
+        t, v = _volts_of(t, column)
     t_arr = np.asarray(t, dtype=np.float64)
     v_arr = np.asarray(v, dtype=np.float64)
     if t_arr.ndim != 1 or t_arr.shape != v_arr.shape or t_arr.size < 2:
@@ -119,6 +133,17 @@ def source_from_recording(
         return float(out) if out.ndim == 0 else out
 
     return source
+
+
+def _volts_of(rec: str | os.PathLike[str] | Recording, column: str | None):
+    if not isinstance(rec, Recording):
+        rec = read_recording(rec)
+    if rec.meta.get("units", "V") != "V":
+        raise ValueError(
+            f"{rec.source or 'recording'}: units are {rec.meta['units']!r}; the emulated chip "
+            "is fed volts (convert the column, e.g. with code_to_volts)"
+        )
+    return rec.t, rec.signal(column)
 
 
 def _zero(t_s: Any) -> Any:

@@ -1,14 +1,13 @@
-"""Crash-tolerant CSV recording in the whiskerid recording format, and a tolerant reader.
+"""Crash-tolerant CSV recording in the whiskerid recording format.
 
-Format (NOTES section 6): leading ``# key: value`` metadata lines, a header ``t,<column>...``,
-then one row per sample with ``t`` in seconds since the start of the recording. The writer
-flushes and fsyncs at least once per second, so a crash or a power cut loses at most the last
-second, and possibly leaves a torn last line, which :func:`read_recording_csv` skips.
+Format: leading ``# key: value`` metadata lines, a header ``t,<column>...``, then one row per
+sample with ``t`` in seconds since the start of the recording. The writer flushes and fsyncs
+at least once per second, so a crash or a power cut loses at most the last second, and possibly
+leaves a torn last line, which :func:`whiskerid.io.read_recording` drops with a warning.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import datetime
 import os
 import time
@@ -16,7 +15,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, TextIO
 
-import numpy as np
+from whiskerid.io import RECORDER_KEY, Recording, read_recording
 
 from ._sampler import Sample
 
@@ -99,7 +98,9 @@ class Recorder:
             meta["units"] = units
         if whisker is not None:
             meta["whisker"] = whisker
-        meta["started_utc"] = (
+        # Also tells the reader that rows were appended live, so that an unterminated last
+        # row is a torn one.
+        meta[RECORDER_KEY] = (
             datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds").replace("+00:00", "Z")
         )
         meta.update(metadata or {})
@@ -183,71 +184,20 @@ class Recorder:
         self.close()
 
 
-@dataclasses.dataclass(frozen=True)
-class CSVRecording:
-    """A recording read back by :func:`read_recording_csv` (fields as in ``whiskerid.Recording``).
+def read_recording_csv(path: str | os.PathLike[str]) -> Recording:
+    """Read a recording CSV, tolerating the torn end a crash leaves; a header-only file is empty.
 
-    Attributes:
-        t: Times in seconds, shape (n,).
-        columns: Signal column name -> values, each shape (n,).
-        meta: The ``# key: value`` lines, values as strings.
-        torn: True if a torn last line was dropped.
-    """
-
-    t: np.ndarray
-    columns: dict[str, np.ndarray]
-    meta: dict[str, str]
-    torn: bool = False
-
-
-def read_recording_csv(path: str | os.PathLike[str]) -> CSVRecording:
-    """Read a recording CSV, tolerating a torn last line left by a crash.
-
-    The writer ends every row with a newline, so a last line without one was cut mid-write and
-    is dropped even if it parses (``1.25,0.5`` may be the start of ``1.25,0.5123``). Trailing
-    NUL bytes (what some filesystems leave after a power cut) are ignored. Anything malformed
-    before the last line is an error, not a crash artefact.
-
-    Args:
-        path: The CSV file.
-
-    Returns:
-        The recording.
+    The same reader as :func:`whiskerid.io.read_recording` (``allow_empty=True``): a last row
+    without its newline is dropped with a :class:`whiskerid.io.TornRecordingWarning` even if
+    it parses (``1.25,0.5`` may be the start of ``1.25,0.5123``), trailing NUL bytes (what
+    some filesystems leave after a power cut) are ignored with the same warning, and anything
+    malformed before the last row is an error.
 
     Raises:
-        ValueError: If the header is missing or a complete row is malformed.
+        whiskerid.io.RecordingError: No header, or a complete row is malformed.
     """
-    text = Path(path).read_bytes().rstrip(b"\0").decode("utf-8", errors="replace")
-    lines = text.split("\n")
-    torn = lines[-1] != ""  # "" when the file ends with a newline
-    lines = lines[:-1]
-    metadata: dict[str, str] = {}
-    i = 0
-    while i < len(lines) and lines[i].startswith("#"):
-        key, sep, value = lines[i][1:].partition(":")
-        if sep:
-            metadata[key.strip()] = value.strip()
-        i += 1
-    if i >= len(lines):
-        raise ValueError(f"{path}: no header line 't,<column>...'")
-    header = [h.strip() for h in lines[i].split(",")]
-    if header[0] != "t" or len(header) < 2:
-        raise ValueError(f"{path}: header must be 't,<column>...', got {lines[i]!r}")
-    rows = []
-    for lineno, line in enumerate(lines[i + 1 :], start=i + 2):
-        if not line.strip():
-            continue
-        fields = line.split(",")
-        try:
-            if len(fields) != len(header):
-                raise ValueError(f"{len(fields)} fields, expected {len(header)}")
-            rows.append([float(f) for f in fields])
-        except ValueError as e:
-            raise ValueError(f"{path}:{lineno}: malformed row {line!r}: {e}") from None
-    data = np.array(rows, dtype=np.float64).reshape(len(rows), len(header))
-    return CSVRecording(
-        t=data[:, 0].copy(),
-        columns={name: data[:, j].copy() for j, name in enumerate(header[1:], start=1)},
-        meta=metadata,
-        torn=torn,
-    )
+    return read_recording(path, allow_empty=True)
+
+
+#: The recording type :func:`read_recording_csv` returns (the library's own).
+CSVRecording = Recording

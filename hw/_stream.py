@@ -26,6 +26,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..classify import fuse_context
+from ..terrain import AMPLIFIER, amplified_hall, base_acceleration, hall_voltage
+from ._emulator import source_from_recording
+from ._recorder import Recorder, unique_path
+
 
 @dataclass(frozen=True)
 class WindowLabel:
@@ -139,8 +144,6 @@ class OnlineClassifier:
 
     def classify(self, pending: PendingWindow) -> WindowLabel:
         """Run the model on a cut window (features + MLP) and fuse its context."""
-        from ..classify._classify import fuse_context
-
         p = self.model.window_proba(pending.samples, self.speed)
         lookback = getattr(self.model, "lookback_s", 0.0)
         recent = self._recent
@@ -363,27 +366,16 @@ def run_stream(
 
 
 def terrain_source(record, terrain: str, speed_mps: float, duration_s: float, *, seed: int = 0,
-                   amplifier: float = 20.0):  # fmt: skip
+                   amplifier: float = AMPLIFIER):  # fmt: skip
     """Hall-sensor voltage ``source(t_s)`` of a whisker driven over a simulated terrain.
 
-    Uses the terrain simulator's base motion and the exact modal model; the emulated ADS1115
-    then does the averaging, clipping and quantisation itself.
+    The terrain simulator's base motion, whisker and amplified Hall sensor
+    (:func:`whiskerid.terrain.hall_voltage`, the chain the dataset synthesiser uses); the
+    emulated ADS1115 then does the averaging, clipping and quantisation itself.
     """
-    import jax.numpy as jnp
-
-    from ..model._response import base_motion_response, observe
-    from ..model._sensor import HallSensor
-    from ..terrain._terrain import base_acceleration
-    from ._emulator import source_from_recording
-
     rng = np.random.default_rng([seed, 7919])
     t, acc = base_acceleration(terrain, speed_mps, duration_s + 1.0, rng)
-    whisker = record.whisker()
-    state = base_motion_response(whisker, jnp.asarray(t), jnp.asarray(acc), uniform=True)
-    hall = HallSensor(gain_v_per_m=record.hall.gain_v_per_m * amplifier,
-                      offset_v=record.hall.offset_v,
-                      quadratic_v_per_m2=record.hall.quadratic_v_per_m2 * amplifier)  # fmt: skip
-    volts = np.asarray(hall.voltage(observe(whisker, state, "deflection")))
+    volts = np.asarray(hall_voltage(record.whisker(), amplified_hall(record, amplifier), t, acc))
     keep = t >= 0
     return source_from_recording(t[keep], volts[keep])
 
@@ -392,7 +384,5 @@ def open_recorder(path: Path | None, *, rate_hz: float, meta: dict):
     """A crash-safe CSV recorder of ADC codes, or None; never overwrites (``-1``, ``-2``...)."""
     if path is None:
         return None
-    from ._recorder import Recorder, unique_path
-
     return Recorder(unique_path(path), columns=("adc",), rate_hz=rate_hz, units="code",
                     metadata=meta)  # fmt: skip

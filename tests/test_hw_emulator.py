@@ -8,6 +8,7 @@ from whiskerid.hw import (
     Config,
     EmulatedADS1115,
     FakeClock,
+    Recorder,
     decode_conversion,
     encode_config,
     source_from_recording,
@@ -308,6 +309,19 @@ def test_source_from_recording_interpolates(clock):
     clock.advance(5.0)
     code = convert_once(emu, clock, Config(mux="AIN0_GND", data_rate_sps=860))
     assert code == volts_to_code(0.1 * (5.0 + 0.5 / 860), 2.048)
+
+
+def test_source_from_a_recording_file_in_volts_not_codes(tmp_path):
+    with Recorder(tmp_path / "v.csv", columns=("a", "b")) as rec:
+        for t in (0.0, 1.0, 2.0):
+            rec.write(t, 1.0 + t, 10.0 * t)
+    assert source_from_recording(tmp_path / "v.csv")(0.5) == 1.5
+    assert source_from_recording(tmp_path / "v.csv", column="b")(1.5) == 15.0
+    with Recorder(tmp_path / "c.csv", columns=("adc",), units="code") as rec:
+        rec.write(0.0, 100)
+        rec.write(1.0, 200)
+    with pytest.raises(ValueError, match=r"c\.csv: units are 'code'"):
+        source_from_recording(tmp_path / "c.csv")
 
 
 def test_transfer_log_is_bounded(clock):

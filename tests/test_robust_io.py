@@ -13,7 +13,8 @@ import pytest
 import whiskerid as wi
 from whiskerid.cli._main import json_safe, main
 from whiskerid.fit._calibrate import _poor_fit_warnings
-from whiskerid.terrain._terrain import RunSpec, dataset_paths, speed_tag, synthesize_dataset
+from whiskerid.io import TornRecordingWarning
+from whiskerid.terrain import RunSpec, dataset_paths, speed_tag, synthesize_dataset
 
 T = np.round(np.arange(12) / 200.0, 6)
 X = np.arange(12) * 3 - 7
@@ -101,6 +102,28 @@ def test_bad_csv_is_refused_with_file_line_and_column(tmp_path, case):
     with pytest.raises(wi.RecordingError) as info:
         wi.read_recording(path)
     assert str(info.value).startswith(str(path)) and message in str(info.value)
+
+
+TORN_TAILS = {
+    # What follows the 12 complete rows, without a newline; the rows read back.
+    "short row": ("0.06", 12),
+    "row cut after the delimiter": ("0.06,", 12),
+    "row cut mid-exponent": ("0.06,1e", 12),
+    "complete row (a hand-edited file)": ("0.06,29", 13),
+}
+
+
+@pytest.mark.parametrize("case", TORN_TAILS)
+def test_a_torn_last_row_is_dropped_with_a_warning_a_complete_one_kept(tmp_path, case):
+    tail, rows = TORN_TAILS[case]
+    path = _write(tmp_path / "r.csv", "\n".join(["t,adc", *_rows(), tail]))
+    if rows == 12:
+        with pytest.warns(TornRecordingWarning, match=r"r\.csv line 14: dropped the torn last"):
+            rec = wi.read_recording(path)
+    else:
+        rec = wi.read_recording(path)  # no warning: filterwarnings = error
+    assert rec.t.size == rows
+    np.testing.assert_array_equal(rec.signal()[:12], X)
 
 
 def test_a_recording_without_signal_columns_has_no_signal():
@@ -367,9 +390,11 @@ def test_poor_fit_warning_names_the_recording_below_3_db():
 def test_calibrating_a_recording_timed_in_ms_is_refused(tmp_path, capsys):
     """With rate_hz metadata the timestamps contradict it; without, the sampling is far
     too slow for the whisker's first mode. Either way nothing is fitted or written."""
-    sim = wi.simulate(wi.paper_record(), excitation="decay", rate_hz=200.0, duration_s=3.0,
-                      noise_db=30.0, seed=1)  # fmt: skip
-    sim.t = sim.t * 1000.0  # milliseconds where seconds are expected
+    t_s = np.arange(600) / 200.0  # 3 s at 200 Hz of a decaying 30 Hz deflection, with noise
+    rng = np.random.default_rng(1)
+    w = 1e-5 * np.exp(-2.0 * t_s) * np.cos(2 * np.pi * 30.0 * t_s) + 3e-7 * rng.normal(size=600)
+    sim = wi.Recording(t=t_s * 1000.0, columns={"deflection": w},  # ms where s are expected
+                       meta={"rate_hz": "200", "units": "m"})  # fmt: skip
     whisker = wi.paper_record().save(tmp_path / "w.toml")
     out = tmp_path / "cal.toml"
     assert "rate_hz" in sim.meta

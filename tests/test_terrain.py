@@ -1,15 +1,36 @@
-"""Terrain simulator: determinism, wheel filter, speed moves texture frequency."""
+"""Terrain simulator: determinism, compiled once, wheel filter, speed moves texture frequency."""
 
+import logging
+from dataclasses import replace
+
+import jax
 import numpy as np
+import pytest
 
 import whiskerid as wi
-from whiskerid.terrain._terrain import RunSpec, base_acceleration, iso8608_roughness
+from whiskerid.terrain import RunSpec, base_acceleration, iso8608_roughness
 
 
-def test_synthesis_is_deterministic_by_seed_and_independent_of_the_batch():
-    a = wi.synthesize_runs([RunSpec("brick", 0.2, 0), RunSpec("sand", 0.1, 1)], duration_s=2.0)
-    b = wi.synthesize_runs([RunSpec("sand", 0.1, 1)], duration_s=2.0)
-    c = wi.synthesize_runs([RunSpec("sand", 0.1, 1)], duration_s=2.0, seed=1)
+def _compiles(caplog) -> int:
+    return sum("Compiling" in r.getMessage() for r in caplog.records)
+
+
+BRICK, SAND = RunSpec("brick", 0.2, 0), RunSpec("sand", 0.1, 1)
+
+
+def test_synthesis_is_deterministic_by_seed_and_compiled_once(caplog):
+    a = wi.synthesize_runs([BRICK, SAND], duration_s=2.0)
+    # Another seed, terrains, speeds, whisker and amplifier in batches of the same shapes:
+    # nothing is compiled again (the physical numbers are traced, not baked in).
+    other = replace(wi.paper_record(), zeta=0.07, tip_mass_kg=1e-4, sensor_position_m=0.006)
+    with caplog.at_level(logging.WARNING), jax.log_compiles():
+        b = wi.synthesize_runs([SAND, RunSpec("flat", 0.15, 0)], duration_s=2.0)
+        c = wi.synthesize_runs([SAND, BRICK], duration_s=2.0, seed=1)
+        d = wi.synthesize_runs([RunSpec("soft-soil", 0.3, 2), RunSpec("carpet", 0.25, 0)],
+                               duration_s=2.0, record=other, amplifier=13.0)  # fmt: skip
+    assert _compiles(caplog) == 0
+    assert d[0].signal().std() > 0
+    # A run does not depend on the runs synthesised with it, nor on its place among them.
     np.testing.assert_array_equal(a[1].signal(), b[0].signal())
     np.testing.assert_array_equal(a[1].t, b[0].t)
     assert not np.array_equal(b[0].signal(), c[0].signal())
@@ -17,6 +38,14 @@ def test_synthesis_is_deterministic_by_seed_and_independent_of_the_batch():
     assert rec.t.size == 400 and rec.meta["terrain"] == "brick" and rec.meta["speed_mps"] == "0.2"
     assert np.all(np.diff(rec.t) > 0) and abs(np.median(np.diff(rec.t)) - 0.005) < 1e-4
     assert rec.signal().dtype.kind == "i" and rec.signal().std() > 3  # codes that vary
+
+
+@pytest.mark.slow
+def test_synthesis_does_not_depend_on_the_batch_size():
+    whole = wi.synthesize_runs([BRICK, SAND], duration_s=2.0)
+    single = wi.synthesize_runs([BRICK, SAND], duration_s=2.0, batch=1)
+    for x, y in zip(whole, single, strict=True):
+        np.testing.assert_array_equal(x.signal(), y.signal())
 
 
 def test_wheel_filter_passes_long_waves_and_removes_short_ones():

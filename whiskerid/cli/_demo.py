@@ -200,7 +200,7 @@ def _stream_stage(out: Path, model_dir: Path, *, say, terrain: str = "brick") ->
     """10 s of the Pi's loop on an emulated ADS1115 (virtual clock): sample, classify, record."""
     from .. import hw
     from ..classify._classify import ClassifierModel
-    from ..hw._stream import OnlineClassifier, open_recorder, run_stream, terrain_source
+    from ..hw import OnlineClassifier, open_recorder, run_stream, terrain_source
 
     say(f"[7] online stream: emulated ADS1115 fed by the simulator on {terrain} at 0.2 m/s, 10 s")
     clock = hw.FakeClock()

@@ -1,4 +1,4 @@
-"""Recordings on disk (NOTES §6): CSV with ``# key: value`` metadata lines, NPZ, NPY.
+"""Recordings on disk: CSV with ``# key: value`` metadata lines, NPZ, NPY.
 
 CSV layout::
 
@@ -10,11 +10,17 @@ CSV layout::
 
 ``t`` is in seconds and need not be uniform. NPZ files hold a ``t`` array and one array per
 signal column (metadata under ``meta_<key>``); NPY files hold a ``(2, N)`` or ``(N, 2)``
-array of time and one signal (the layout of the cantilever recordings in ``shared/data``).
+array of time and one signal (the layout of the cantilever recordings).
+
+A CSV may end in a torn row: the Raspberry Pi's recorder appends rows while it runs, so a
+crash or a power cut can cut the last row mid-number or leave NUL bytes behind it. The reader
+drops such a tail with a :class:`TornRecordingWarning` that names the file; a malformed row
+anywhere before the end is still an error.
 """
 
 import csv
 import io
+import warnings
 import zipfile
 import zlib
 from dataclasses import dataclass, field
@@ -25,6 +31,21 @@ import numpy as np
 
 class RecordingError(ValueError):
     """A recording that cannot be read or is unfit for use (message says what and where)."""
+
+
+class TornRecordingWarning(UserWarning):
+    """The end of a CSV recording was cut off while it was written; the torn part was dropped.
+
+    A crash or a power cut while a recorder appends rows leaves a last row without its
+    newline (cut mid-number, or short) and sometimes NUL bytes after it. The message names
+    the file and what was dropped.
+    """
+
+
+#: The metadata key that :class:`whiskerid.hw.Recorder` writes in every file. Such a file
+#: is appended row by row and every complete row ends in a newline, so a last row without
+#: one was cut mid-write and is dropped even when it parses (``…,131`` of ``…,13188``).
+RECORDER_KEY = "started_utc"
 
 
 @dataclass
@@ -81,8 +102,18 @@ def _formatter(col: np.ndarray, precision: int):
     return lambda v: f"{float(v):.{precision}g}"
 
 
-def read_recording(path: str | Path, *, time_col: str = "t") -> Recording:
+def read_recording(
+    path: str | Path, *, time_col: str = "t", allow_empty: bool = False
+) -> Recording:
     """Read a CSV, NPZ or NPY recording.
+
+    A torn end of a CSV (see :class:`TornRecordingWarning`) is dropped with that warning.
+
+    Args:
+        path: The file.
+        time_col: Name of the time column (CSV) or array (NPZ).
+        allow_empty: Return a recording without samples for a CSV holding only its header
+            (a recorder stopped before its first row was on disk) instead of raising.
 
     Raises:
         RecordingError: Missing file, unknown format, no time or signal column, unparsable
@@ -99,7 +130,7 @@ def read_recording(path: str | Path, *, time_col: str = "t") -> Recording:
         raise RecordingError(
             f"{path}: unknown recording format {path.suffix!r}; use .csv, .npz or .npy"
         )
-    rec = reader(path, time_col)
+    rec = _read_csv(path, time_col, allow_empty) if reader is _read_csv else reader(path, time_col)
     if not rec.columns:
         raise RecordingError(
             f"{path}: no signal column, only the time column {time_col!r}; "
@@ -124,11 +155,18 @@ class CsvTable:
     meta: dict[str, str]
 
 
-def read_csv_table(path: str | Path) -> CsvTable:
+def read_csv_table(path: str | Path, *, allow_empty: bool = False) -> CsvTable:
     """Read a numeric CSV: ``# key: value`` lines, a header row, then numbers.
 
     Accepts a UTF-8 byte-order mark, CRLF line ends, blank lines, and comma, tab or
-    semicolon delimiters (detected from the header row).
+    semicolon delimiters (detected from the header row). A torn end (NUL bytes, or a last
+    row without its newline that is short, not numeric, or in a recorder's file) is dropped
+    with a :class:`TornRecordingWarning`.
+
+    Args:
+        path: The file.
+        allow_empty: Return a table without rows for a file holding only its header
+            instead of raising.
 
     Raises:
         RecordingError: Not UTF-8, no header, empty or duplicate column names, a comment
@@ -136,13 +174,22 @@ def read_csv_table(path: str | Path) -> CsvTable:
             (named by line and column).
     """
     path = Path(path)
-    lines = _decode(path).splitlines()
+    text = _decode(path)
+    lines = text.splitlines()
     meta, at = _metadata(lines)
     if at is None:
         raise RecordingError(f"{path}: no header row")
     delimiter = _delimiter(lines[at])
     header = [h.strip() for h in _split(lines[at], delimiter)]
     _check_header(path, header, at + 1)
+    if _torn_last_row(text, lines, at, delimiter, len(header), RECORDER_KEY in meta):
+        warnings.warn(
+            f"{path} line {len(lines)}: dropped the torn last row {lines[-1][:40]!r} (no "
+            "newline: the file was cut while it was written, e.g. by a crash or power cut)",
+            TornRecordingWarning,
+            stacklevel=2,
+        )
+        lines = lines[:-1]
     rows, numbers = [], []
     for i in range(at + 1, len(lines)):
         line = lines[i]
@@ -159,6 +206,8 @@ def read_csv_table(path: str | Path) -> CsvTable:
         rows.append(cells)
         numbers.append(i + 1)
     if not rows:
+        if allow_empty:
+            return CsvTable(header=header, data=np.empty((0, len(header))), meta=meta)
         raise RecordingError(f"{path}: no data rows after the header")
     try:
         data = np.array(rows, dtype=float)
@@ -169,6 +218,15 @@ def read_csv_table(path: str | Path) -> CsvTable:
 
 def _decode(path: Path) -> str:
     raw = path.read_bytes()
+    kept = raw.rstrip(b"\0")
+    if len(kept) < len(raw):
+        warnings.warn(
+            f"{path}: ignored {len(raw) - len(kept)} NUL byte(s) at the end (what a power cut "
+            "can leave after the last write)",
+            TornRecordingWarning,
+            stacklevel=2,
+        )
+        raw = kept
     try:
         # utf-8-sig drops the byte-order mark that spreadsheet programs put in front.
         return raw.decode("utf-8-sig")
@@ -178,6 +236,34 @@ def _decode(path: Path) -> str:
             f"{path} line {line}: not UTF-8 text (byte 0x{raw[err.start]:02x}); "
             "save the file as UTF-8"
         ) from None
+
+
+def _torn_last_row(
+    text: str, lines: list[str], header_at: int, delimiter: str, width: int, recorder: bool
+) -> bool:
+    """Whether the last line is a row cut mid-write.
+
+    It has no newline, and it is in a recorder's file (where every complete row ends in
+    one), or it looks cut: every cell but the last is a number, and the row is short or its
+    last cell is not a number (empty, ``-``, ``1e``).
+    """
+    last = len(lines) - 1
+    if last <= header_at or text.endswith(("\n", "\r")) or not lines[last].strip():
+        return False
+    if recorder:
+        return True
+    cells = [c.strip() for c in _split(lines[last], delimiter)]
+    if len(cells) > width or not all(_is_number(c) for c in cells[:-1]):
+        return False
+    return len(cells) < width or not _is_number(cells[-1])
+
+
+def _is_number(cell: str) -> bool:
+    try:
+        float(cell)
+    except ValueError:
+        return False
+    return True
 
 
 def _metadata(lines: list[str]) -> tuple[dict[str, str], int | None]:
@@ -247,8 +333,8 @@ def _bad_cell(path: Path, line: int, column: str, cell: str) -> str:
     return f"{where}; use a decimal point, not a comma"
 
 
-def _read_csv(path: Path, time_col: str) -> Recording:
-    table = read_csv_table(path)
+def _read_csv(path: Path, time_col: str, allow_empty: bool = False) -> Recording:
+    table = read_csv_table(path, allow_empty=allow_empty)
     if time_col not in table.header:
         raise RecordingError(f"{path}: no time column {time_col!r}; header is {table.header}")
     cols = {h: table.data[:, j] for j, h in enumerate(table.header)}

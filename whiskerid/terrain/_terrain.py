@@ -59,9 +59,11 @@ whisker's Hall sensor is read by an ADS1115 on a Pi at 200 Hz. Each stage is phy
    0.3 m/s) and its second harmonic, and broadband chassis noise.
 5. **Whisker, sensor, ADC**: the base acceleration (on a 2 kHz grid, well above the 288 Hz
    second mode) drives the exact modal model (:func:`base_motion_response`, jitted and
-   vmapped over runs); the relative deflection at the sensor goes through the Hall sensor,
-   the ADS1115's averaging over its conversion (the anti-alias filter), its noise and
-   quantisation, sampled at 200 Hz with timestamp jitter and a per-run oscillator error.
+   vmapped over runs; :func:`hall_voltage` is the same whisker and sensor for one run, which
+   the online stream feeds to the register-level emulated chip); the relative deflection at
+   the sensor goes through the Hall sensor, the ADS1115's averaging over its conversion (the
+   anti-alias filter), its noise and quantisation, sampled at 200 Hz with timestamp jitter
+   and a per-run oscillator error.
 
 **Run-to-run variation** (so that classes overlap, as real terrain does): ``G₀`` varies by a
 log-normal factor (σ = 0.35 in ln), ``w`` by ±0.1, spacings by 8 %, depths and heights by
@@ -79,10 +81,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..io._recording import Recording, write_csv
-from ..model._record import WhiskerRecord, paper_record
-from ..model._response import base_motion_response, observe
-from ..model._sensor import HallSensor
+from ..io import Recording, write_csv
+from ..model import (
+    HallSensor,
+    Whisker,
+    WhiskerRecord,
+    base_motion_response,
+    observe,
+    paper_record,
+)
 
 SPEEDS_MPS = (0.10, 0.15, 0.20, 0.25, 0.30)
 WHEEL_RADIUS_M = 0.035
@@ -92,6 +99,7 @@ PROFILE_DX_M = 5e-4
 INTERNAL_RATE_HZ = 2000.0
 SETTLE_S = 1.0  # simulated before t = 0 and dropped: the whisker starts from rest
 TAIL_S = 0.5  # simulated after the end: the FFT filtering wraps around at the ends
+AMPLIFIER = 20.0  # gain of the paper's sensor amplifier, on top of the bare Hall gain
 MIN_DATASET_DURATION_S = 2.0  # shortest recording synthesize_dataset makes: a window is 1 s
 _SOURCE = "whiskerid terrain simulator"  # metadata that marks the simulator's recordings
 
@@ -353,13 +361,47 @@ def _drivetrain(t, v, rng, lowpass, f) -> np.ndarray:
     return tone + 0.05 * _lognormal(rng, 0.5) * noise / (np.std(noise) + 1e-30)
 
 
+def amplified_hall(record: WhiskerRecord, amplifier: float = AMPLIFIER) -> HallSensor:
+    """The record's Hall sensor behind an amplifier of gain ``amplifier`` (offset unchanged)."""
+    return HallSensor(
+        gain_v_per_m=record.hall.gain_v_per_m * amplifier,
+        offset_v=record.hall.offset_v,
+        quadratic_v_per_m2=record.hall.quadratic_v_per_m2 * amplifier,
+    )
+
+
+def _deflection(whisker: Whisker, grid_t, acc):
+    """Relative deflection at the sensor (m), the whisker starting from rest at ``grid_t[0]``."""
+    state = base_motion_response(whisker, grid_t, acc, uniform=True)
+    return observe(whisker, state, "deflection")
+
+
+@eqx.filter_jit
+def hall_voltage(whisker: Whisker, hall: HallSensor, grid_t, acc):
+    """Hall-sensor voltage of a whisker whose base moves with acceleration ``acc``.
+
+    The exact modal model from rest, then the sensor: the signal at the ADS1115's input,
+    before its averaging over a conversion. Compiled once per grid length: the whisker's and
+    the sensor's parameters are traced, not baked in.
+
+    Args:
+        whisker: The whisker.
+        hall: The Hall sensor (with its amplifier, see :func:`amplified_hall`).
+        grid_t: Uniform time grid (s), e.g. from :func:`base_acceleration`.
+        acc: Base acceleration on the grid (m/s²).
+
+    Returns:
+        Volts on the grid.
+    """
+    return hall.voltage(_deflection(whisker, grid_t, acc))
+
+
 @eqx.filter_jit
 def _sensor_chain(whisker, hall, grid_t, acc, t_samples, conv_time, n_avg: int):
     """Hall voltage averaged over each conversion, for a batch of runs (vmapped)."""
 
     def one(acc, t_samples, conv_time):
-        state = base_motion_response(whisker, grid_t, acc, uniform=True)
-        w = observe(whisker, state, "deflection")
+        w = _deflection(whisker, grid_t, acc)
         offsets = -(jnp.arange(n_avg) + 0.5) / n_avg * conv_time
         tt = t_samples[:, None] + offsets[None, :]
         return jnp.mean(hall.voltage(jnp.interp(tt, grid_t, w)), axis=1)
@@ -391,7 +433,7 @@ def synthesize_runs(
     seed: int = 0,
     jitter_s: float = 2e-4,
     noise_v_rms: float = 2.5e-4,
-    amplifier: float = 20.0,
+    amplifier: float = AMPLIFIER,
     batch: int = 24,
 ) -> list[Recording]:
     """Synthesise recordings (ADS1115 codes, column ``adc``) of the given runs.
@@ -421,11 +463,7 @@ def synthesize_runs(
             "at least 2 samples"
         )
     whisker = record.whisker()
-    hall = HallSensor(
-        gain_v_per_m=record.hall.gain_v_per_m * amplifier,
-        offset_v=record.hall.offset_v,
-        quadratic_v_per_m2=record.hall.quadratic_v_per_m2 * amplifier,
-    )
+    hall = amplified_hall(record, amplifier)
     rows = []
     for spec in specs:
         rng = _run_rng(seed, spec)
@@ -495,7 +533,7 @@ def synthesize_dataset(
     seed: int = 0,
     replace_synthetic: bool = False,
 ) -> list[Path]:
-    """Write a labelled dataset ``out/<terrain>/<terrain>_v<speed>_r<run>.csv`` (NOTES §6).
+    """Write a labelled dataset ``out/<terrain>/<terrain>_v<speed>_r<run>.csv`` as CSV recordings.
 
     Args:
         out: A new or empty folder (one holding CSV files is refused: old and new
