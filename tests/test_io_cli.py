@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import whiskerid as wi
-from whiskerid.cli._main import main
+from whiskerid.cli import main
 
 
 def test_csv_round_trip_with_metadata(tmp_path):
