@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import whiskerid as wi
-from whiskerid.cli._main import main
+from whiskerid.cli import main
 
 PAPER = "fits/paper-whisker.toml"
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import whiskerid as wi
-from whiskerid.cli._main import main
+from whiskerid.cli import main
 
 
 def test_csv_round_trip_with_metadata(tmp_path):
@@ -135,6 +135,7 @@ def test_simulate_bad_input_one_line_and_status_2(tmp_path, capsys, argv, messag
     assert not (tmp_path / "x.csv").exists()
 
 
+@pytest.mark.slow  # every stage of the demo, with its plots
 def test_demo_runs_end_to_end(tmp_path, capsys):
     assert main(["demo", "--out", str(tmp_path), "--json"]) == 0
     summary = json.loads(capsys.readouterr().out)

@@ -195,11 +195,9 @@ def test_json_safe_replaces_every_non_finite_float_by_null():
 
 
 def test_cli_json_is_standard_json(tmp_path, capsys, monkeypatch):
-    import whiskerid.cli._main as cli
+    import whiskerid.cli._simulate as command
 
-    monkeypatch.setattr(
-        cli, "_cmd_simulate", lambda args: {"x": np.float64(np.nan), "y": [-np.inf]}
-    )
+    monkeypatch.setattr(command, "run", lambda args: {"x": np.float64(np.nan), "y": [-np.inf]})
     assert main(["simulate", "--out", str(tmp_path / "s.csv"), "--json"]) == 0
 
     def strict(name):

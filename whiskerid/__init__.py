@@ -34,10 +34,10 @@ start JAX; the first JAX-using name turns on float64 (``jax_enable_x64``): the m
 import importlib
 from typing import TYPE_CHECKING
 
-from ._version import __version__ as __version__
-
-# public name -> the sub-package that defines it (loaded on first use, PEP 562)
+# public name -> the sub-package (or module) that defines it (loaded on first use, PEP 562;
+# even the version, which the installed package's metadata gives, but slowly)
 _LAZY = {
+    "__version__": "_version",
     "ClassifierModel": "classify",
     "FeatureSpec": "classify",
     "ModelError": "classify",
@@ -114,6 +114,7 @@ _LAZY = {
 }
 
 if TYPE_CHECKING:  # static tools see every name
+    from ._version import __version__ as __version__
     from .classify import ClassifierModel as ClassifierModel
     from .classify import FeatureSpec as FeatureSpec
     from .classify import ModelError as ModelError
@@ -203,4 +204,4 @@ def __dir__() -> list[str]:
     return sorted([*globals(), *_LAZY])
 
 
-__all__ = ["__version__", *sorted(_LAZY)]
+__all__ = sorted(_LAZY)

@@ -22,3 +22,7 @@ LIKELIHOODS = ("gaussian", "student")
 MOVES = ("de", "stretch", "de-snooker")
 #: Feature sets of the classifier.
 FEATURE_KINDS = ("fitted", "paper")
+#: Terrains of the simulator and of the paper's dataset.
+TERRAINS = ("flat", "cement", "brick", "carpet", "soft-grass", "sand", "soft-soil")
+#: Nominal robot speeds of the paper's dataset (m/s).
+SPEEDS_MPS = (0.10, 0.15, 0.20, 0.25, 0.30)

@@ -2,23 +2,13 @@
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
+from .._choices import EXCITATIONS, OBSERVABLES, PINS, SOLVERS
+from ._common import HelpFormatter
 
-from ..fit._calibrate import (
-    EXCITATIONS,
-    G0,
-    OBSERVABLES,
-    PINS,
-    CalibrationError,
-    Observation,
-    calibrate,
-    read_static_test,
-    release_time,
-)
-from ..fit._lsq import SOLVERS
-from ..io._recording import RecordingError, check_out_path, read_recording
-from ..model._record import load_record
+if TYPE_CHECKING:
+    from ..fit._calibrate import Observation
 
 
 def add_calibrate(sub, command_error) -> None:
@@ -36,7 +26,7 @@ def add_calibrate(sub, command_error) -> None:
             "Writes the record with fitted values and a [fit] table (values, 1-sigma, "
             "correlations, status, residuals, data files with SHA-256)."
         ),
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     p.add_argument("recordings", nargs="+", type=Path, metavar="REC", help="CSV/NPZ/NPY recordings")
     p.add_argument("--whisker", type=Path, required=True, help="the whisker's record (TOML)")
@@ -50,7 +40,12 @@ def add_calibrate(sub, command_error) -> None:
     )
     p.add_argument("--modes", type=int, default=2, help="modes in the model")
     p.add_argument("--zeta-per-mode", action="store_true", help="one zeta per mode")
-    p.add_argument("--solver", choices=SOLVERS, default="levenberg-marquardt")
+    p.add_argument(
+        "--solver",
+        choices=SOLVERS,
+        default="levenberg-marquardt",
+        help="least-squares solver (optimistix)",
+    )
     p.add_argument("--plot", type=Path, help="save data, fit and residuals as this PNG")
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.set_defaults(func=lambda args: _cmd_calibrate(args, command_error))
@@ -105,6 +100,8 @@ def check_data_options(args) -> None:
     Raises:
         ValueError: Which option is wrong and what it must be.
     """
+    import numpy as np
+
     for flag, value in (("--sensor-x", args.sensor_x), ("--t-start", args.t_start),
                         ("--t-end", args.t_end)):  # fmt: skip
         if value is not None and not np.isfinite(value):
@@ -119,6 +116,8 @@ def check_data_options(args) -> None:
 
 
 def _observable(args, rec, col: str) -> str:
+    from ..fit._calibrate import CalibrationError
+
     if args.observable != "auto":
         return args.observable
     if col in OBSERVABLES:
@@ -144,6 +143,7 @@ def _check_sampling(rec, record) -> None:
     for the whisker's first mode (a time column in ms read as seconds is 1000 times too
     slow): a fit to either would end with numbers, all of them wrong."""
     from ..classify._classify import recording_rate, timestamp_rate
+    from ..io._recording import RecordingError
 
     recording_rate(rec)
     rate = timestamp_rate(rec.t)
@@ -155,8 +155,13 @@ def _check_sampling(rec, record) -> None:
         )
 
 
-def load_observation(path: Path, record, args) -> Observation:
+def load_observation(path: Path, record, args) -> "Observation":
     """Read one recording and turn it into an :class:`Observation` per the CLI flags."""
+    import numpy as np
+
+    from ..fit._calibrate import G0, CalibrationError, Observation, release_time
+    from ..io._recording import RecordingError, read_recording
+
     rec = read_recording(path, time_col=args.time_col)
     _check_sampling(rec, record)
     signal_cols = [c for c in rec.columns if c != args.base_col]
@@ -233,6 +238,10 @@ def _meta_float(rec, key):
 
 def _cmd_calibrate(args, command_error) -> dict:
     import sys
+
+    from ..fit._calibrate import calibrate, read_static_test
+    from ..io._recording import check_out_path
+    from ..model._record import load_record
 
     inputs = {"REC": args.recordings, "--whisker": args.whisker, "--static": args.static}
     check_out_path(args.out, "--out", inputs=inputs)

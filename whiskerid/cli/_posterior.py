@@ -1,16 +1,11 @@
 """``whiskerid posterior``: emcee posteriors of ζ, f_1, κ (EI or C) from recordings (NOTES §7)."""
 
-import argparse
 import sys
 from pathlib import Path
 
-import numpy as np
-
-from ..fit._calibrate import PINS, read_static_test
-from ..io._recording import same_file
-from ..model._record import load_record
-from ..posterior._posterior import LIKELIHOODS, MOVES, sample_posterior
+from .._choices import LIKELIHOODS, MOVES, PINS
 from ._calibrate import add_data_options, check_data_options, load_observation
+from ._common import HelpFormatter
 
 
 def add_posterior(sub, command_error) -> None:
@@ -30,7 +25,7 @@ def add_posterior(sub, command_error) -> None:
             "shorter than 50 autocorrelation times is reported as not converged; --resume "
             "continues it."
         ),
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     p.add_argument("recordings", nargs="+", type=Path, metavar="REC", help="CSV/NPZ/NPY recordings")
     p.add_argument("--fit", type=Path, required=True, help="record from whiskerid calibrate (TOML)")
@@ -45,7 +40,13 @@ def add_posterior(sub, command_error) -> None:
         help="emcee proposal: de (differential evolution; autocorrelation times about a third "
         "of the stretch move's here), stretch (emcee's default), de-snooker (several modes)",
     )
-    p.add_argument("--likelihood", choices=LIKELIHOODS, default="gaussian")
+    p.add_argument(
+        "--likelihood",
+        choices=LIKELIHOODS,
+        default="gaussian",
+        help="noise model: gaussian (linear nuisances marginalised) or student (Student-t with "
+        "--nu degrees of freedom, nuisances sampled)",
+    )
     p.add_argument("--nu", type=float, default=4.0, help="Student-t degrees of freedom")
     p.add_argument("--resume", action="store_true", help="continue DIR/chain.h5 by --steps")
     p.add_argument("--no-plots", action="store_true", help="skip the corner and trace PNGs")
@@ -59,6 +60,12 @@ def add_posterior(sub, command_error) -> None:
 
 
 def _cmd_posterior(args, command_error) -> dict:
+    import numpy as np
+
+    from ..fit._calibrate import read_static_test
+    from ..model._record import load_record
+    from ..posterior._posterior import sample_posterior
+
     if args.out.exists() and not args.out.is_dir():
         raise command_error(f"--out {args.out} is a file; give a folder")
     if args.walkers < 2 or args.steps < 1:
@@ -118,6 +125,8 @@ OUTPUTS = ("posterior.toml", "chain.h5", "corner.png", "trace.png")
 
 def _check_inputs_survive(args, command_error) -> None:
     """Refuse inputs that are among the files written into --out (they would be replaced)."""
+    from ..io._recording import same_file
+
     inputs = [*args.recordings, args.fit, args.static]
     for name in OUTPUTS:
         for p in inputs:

@@ -1,12 +1,14 @@
 """``whiskerid stream``: classify terrain online from an ADS1115 (real or emulated)."""
 
-import argparse
+import math
 import sys
 from pathlib import Path
 
+from ._common import CommandError, HelpFormatter, record_or_paper
 
-def add_stream(sub, command_error) -> None:
-    """Register ``whiskerid stream`` on the CLI's subparsers."""
+
+def add_parser(sub) -> None:
+    """Register ``stream`` on the CLI's subparsers."""
     p = sub.add_parser(
         "stream",
         help="classify terrain online from an ADS1115 stream (Pi, or emulated)",
@@ -18,7 +20,7 @@ def add_stream(sub, command_error) -> None:
             "'whiskerid[pi]') or a register-level emulated chip fed by the terrain simulator "
             "(--simulate TERRAIN). Ctrl-C or SIGTERM stop cleanly and print a summary."
         ),
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     p.add_argument("--model", type=Path, required=True, help="trained model (whiskerid train)")
     src = p.add_mutually_exclusive_group(required=True)
@@ -56,27 +58,26 @@ def add_stream(sub, command_error) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the simulated terrain")
     p.add_argument("--quiet", action="store_true", help="no line per window on stderr")
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
-    p.set_defaults(func=lambda args: _cmd_stream(args, command_error))
+    p.set_defaults(func=run)
 
 
-def _cmd_stream(args, command_error) -> dict:
+def run(args) -> dict:
+    """Stream until --duration, Ctrl-C or SIGTERM; returns the JSON summary."""
     from .. import hw
     from ..classify._classify import ClassifierModel
     from ..hw import OnlineClassifier, open_recorder, run_stream, terrain_source
 
-    _check_numbers(args, command_error)
+    _check_numbers(args)
     if args.fast and args.simulate is None:
-        raise command_error("--fast needs --simulate (a real chip runs in real time)")
+        raise CommandError("--fast needs --simulate (a real chip runs in real time)")
     model = ClassifierModel.load(args.model)
     if args.simulate is not None and args.simulate not in model.labels:
-        raise command_error(f"--simulate {args.simulate!r} is not a terrain of this model; "
+        raise CommandError(f"--simulate {args.simulate!r} is not a terrain of this model; "
                             f"its labels are {', '.join(model.labels)}")  # fmt: skip
     clock = hw.FakeClock() if args.fast else None
     timing = {} if clock is None else {"clock": clock.now_ns, "sleep": clock.sleep}
     if args.simulate is not None:
-        from ..model._record import load_record, paper_record
-
-        record = paper_record() if args.whisker is None else load_record(args.whisker)
+        record = record_or_paper(args.whisker)
         horizon = 600.0 if args.duration is None else args.duration + 2.0
         source = terrain_source(record, args.simulate, args.speed, horizon, seed=args.seed)
         chip = hw.EmulatedADS1115(source, address=args.address, seed=args.seed, **timing)
@@ -117,19 +118,17 @@ def _cmd_stream(args, command_error) -> dict:
 MAX_SIMULATED_S = 3600.0
 
 
-def _check_numbers(args, command_error) -> None:
+def _check_numbers(args) -> None:
     """Refuse NaN, infinities and non-positive values (argparse's float takes 'nan', 'inf')."""
-    import math
-
     for flag, value in (("--duration", args.duration), ("--rate", args.rate),
                         ("--hop", args.hop), ("--speed", args.speed)):  # fmt: skip
         if value is not None and not (math.isfinite(value) and value > 0):
             hint = " (leave it out to run until Ctrl-C)" if flag == "--duration" else ""
-            raise command_error(f"{flag} {value!r} must be a positive number{hint}")
+            raise CommandError(f"{flag} {value!r} must be a positive number{hint}")
     if args.simulate is not None and args.speed >= 5:
-        raise command_error(f"--speed {args.speed:g} m/s is not plausible (0 < v < 5)")
+        raise CommandError(f"--speed {args.speed:g} m/s is not plausible (0 < v < 5)")
     if args.simulate is not None and (args.duration or 0) > MAX_SIMULATED_S:
-        raise command_error(
+        raise CommandError(
             f"--duration {args.duration:g} s: a simulated stream lasts at most "
             f"{MAX_SIMULATED_S:g} s (its terrain is synthesised up front)"
         )

@@ -1,0 +1,59 @@
+"""``whiskerid evaluate``: score a terrain classifier on a labelled dataset."""
+
+from pathlib import Path
+
+from ._common import CONTEXT_HELP, CommandError, HelpFormatter, load_model, say
+
+#: Recordings labelled wrong that ``evaluate`` names on stderr (all of them are in --json).
+_SHOW_WRONG = 10
+
+
+def add_parser(sub) -> None:
+    """Register ``evaluate`` on the CLI's subparsers."""
+    e = sub.add_parser(
+        "evaluate",
+        help="score a classifier on a labelled dataset",
+        description="Accuracy, per-class accuracy and confusion matrix of MODEL on DATASET, "
+        "with labels per window and for whole recordings (the recordings labelled wrong "
+        "are named).",
+        formatter_class=HelpFormatter,
+    )
+    e.add_argument("model", type=Path, help="model folder (whiskerid train)")
+    e.add_argument("dataset", type=Path,
+                   help="dataset folder: one subfolder of recordings per label")  # fmt: skip
+    e.add_argument("--plot", type=Path, help="save the confusion matrix as this PNG")
+    e.add_argument("--context", type=float, metavar="S",
+                   help=CONTEXT_HELP + "; the model's by default")  # fmt: skip
+    e.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    e.set_defaults(func=run)
+
+
+def run(args) -> dict:
+    """Score the model and print its confusion matrix; returns the JSON summary."""
+    from ..classify._classify import evaluate, format_confusion, load_dataset, plot_confusion
+    from ..io._recording import check_out_path
+
+    if args.plot is not None:  # before any work
+        check_out_path(args.plot, "--plot", inputs={"MODEL": args.model, "DATASET": args.dataset})
+    model = load_model(args.model, args.context)
+    ws = load_dataset(args.dataset, channel=model.channel, window_s=model.window / model.rate_hz,
+                      rate_hz=model.rate_hz, labels=model.labels)  # fmt: skip
+    if model.needs_speed and not ws.has_speed:
+        raise CommandError(f"{args.model} needs speed_mps on every recording of {args.dataset}")
+    res = evaluate(model, ws)
+    say(format_confusion(res["confusion"], res["labels"]))
+    say(f"accuracy {res['accuracy']:.4f} on {res['n_windows']} windows, labels resting on "
+        f"{model.context_s:g} s (each window on its own: "
+        f"{res['accuracy_per_window']:.4f}; whole recordings: "
+        f"{res['accuracy_per_recording']:.4f} of {res['n_recordings']})")  # fmt: skip
+    wrong = res["wrong_recordings"]
+    for w in wrong[:_SHOW_WRONG]:
+        say(f"  labelled wrong whole: {w['recording']} as {w['predicted']} "
+            f"(mean probability {w['confidence']:.3f})")  # fmt: skip
+    if len(wrong) > _SHOW_WRONG:
+        say(f"  ... and {len(wrong) - _SHOW_WRONG} more (all in --json: wrong_recordings)")
+    if args.plot:
+        plot_confusion(args.plot, res["confusion"], res["labels"])
+        res["plot"] = str(args.plot)
+        say(f"wrote {args.plot}")
+    return res

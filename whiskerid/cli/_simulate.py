@@ -1,0 +1,152 @@
+"""``whiskerid simulate``: a whisker recording (CSV) from a model and an excitation."""
+
+from pathlib import Path
+
+from .._choices import EXCITATIONS, MODELS, OBSERVABLES, UNITS
+from ._common import CommandError, HelpFormatter, record_or_paper, say
+
+
+def add_parser(sub) -> None:
+    """Register ``simulate`` on the CLI's subparsers."""
+    p = sub.add_parser(
+        "simulate",
+        help="simulate a whisker recording (CSV) from a model and an excitation",
+        description=(
+            "Simulate what a whisker records. Models: 'paper' is Eq. 1 as printed (sine only), "
+            "'steady' the exact modal model's harmonic steady state (sine only), 'exact' the "
+            "exact modal model from rest (sine switched on at t=0, a pluck's free decay, or "
+            "any base motion). Observables: deflection (relative to the base, m), "
+            "acceleration (absolute, m/s^2), voltage (Hall output, V), adc (ADS1115 codes, "
+            "with conversion averaging, oscillator error, clipping, quantisation). The CSV "
+            "has columns t and the observable's name."
+        ),
+        formatter_class=HelpFormatter,
+    )
+    p.add_argument("--whisker", type=Path, help="whisker record (TOML); the paper's by default")
+    p.add_argument(
+        "--model",
+        choices=MODELS,
+        default="exact",
+        help="paper: Eq. 1 as printed; steady: harmonic steady state; exact: from rest",
+    )
+    p.add_argument(
+        "--excitation",
+        choices=EXCITATIONS,
+        default="sine",
+        help="sine: h_b sin(2 pi f_b t); decay: free decay after a pluck; "
+        "base: a measured base motion (--base)",
+    )
+    p.add_argument("--fb", type=float, default=100.0, help="base excitation frequency (Hz)")
+    p.add_argument("--hb", type=float, default=1e-4, help="base excitation amplitude (m)")
+    p.add_argument(
+        "--tip-deflection",
+        type=float,
+        default=1e-3,
+        help="initial tip deflection of a pluck, for --excitation decay (m)",
+    )
+    p.add_argument(
+        "--base",
+        type=Path,
+        help="base motion for --excitation base: a recording (CSV/NPZ/NPY) with "
+        "time and base acceleration (m/s^2)",
+    )
+    p.add_argument(
+        "--base-col",
+        help="column of --base holding the acceleration (the first signal column by default)",
+    )
+    p.add_argument("--rate", type=float, default=200.0, help="sampling rate (Hz)")
+    p.add_argument("--duration", type=float, default=10.0, help="length (s)")
+    p.add_argument(
+        "--observable",
+        choices=OBSERVABLES,
+        default="deflection",
+        help="what the recording holds (see above)",
+    )
+    p.add_argument("--noise-db", type=float, help="add white noise at this SNR (dB)")
+    p.add_argument(
+        "--jitter",
+        type=float,
+        help="timestamp jitter (s); the record's ADC value for voltage/adc, else 0",
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed for noise and jitter")
+    p.add_argument("--out", type=Path, required=True, help="CSV file to write")
+    p.add_argument("--plot", type=Path, help="also save signal and spectrum as this PNG")
+    p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    p.set_defaults(func=run)
+
+
+def run(args) -> dict:
+    """Simulate, write the CSV (and the plot); returns the JSON summary."""
+    import numpy as np
+
+    from ..io._recording import check_out_path, write_csv
+    from ..model._simulate import simulate
+
+    inputs = {"--whisker": args.whisker, "--base": args.base}
+    check_out_path(args.out, "--out", inputs=inputs)
+    if args.plot is not None:
+        check_out_path(args.plot, "--plot", inputs={**inputs, "--out": args.out})
+    record = record_or_paper(args.whisker)
+    base = None
+    if args.excitation == "base":
+        if args.base is None:
+            raise CommandError("--excitation base needs --base FILE (time and base acceleration)")
+        base = _read_base_motion(args.base, args.base_col)
+    sim = simulate(
+        record,
+        model=args.model,
+        excitation=args.excitation,
+        observable=args.observable,
+        fb_hz=args.fb,
+        hb_m=args.hb,
+        tip_deflection_m=args.tip_deflection,
+        base=base,
+        rate_hz=args.rate,
+        duration_s=args.duration,
+        noise_db=args.noise_db,
+        jitter_s=args.jitter,
+        seed=args.seed,
+    )
+    write_csv(args.out, sim)
+    say(f"wrote {args.out} ({sim.t.size} samples of {args.observable})")
+    x = sim.signal()
+    summary = {
+        "out": str(args.out),
+        "samples": int(sim.t.size),
+        "observable": args.observable,
+        "units": UNITS[args.observable],
+        "min": float(np.min(x)),
+        "max": float(np.max(x)),
+        "dominant_peaks_hz": _peaks(sim.t, x),
+    }
+    if args.plot:
+        from ..plot._plot import plot_signal_and_spectrum
+
+        plot_signal_and_spectrum(
+            args.plot,
+            sim.t,
+            x,
+            label=f"{args.observable} ({UNITS[args.observable]})",
+            title=f"{record.name}: {args.model} model, {args.excitation} excitation",
+        )
+        summary["plot"] = str(args.plot)
+        say(f"wrote {args.plot}")
+    return summary
+
+
+def _read_base_motion(path: Path, column: str | None):
+    from ..classify._classify import recording_rate
+    from ..io._recording import check_samples, read_recording
+    from ..model._simulate import BaseMotion
+
+    rec = read_recording(path)
+    acc = rec.signal(column)
+    check_samples(rec.t, acc, where=str(path))
+    recording_rate(rec)  # rate_hz metadata, if any, must agree with the timestamps
+    return BaseMotion(t=rec.t, acc=acc)
+
+
+def _peaks(t, x, n: int = 3) -> list[float]:
+    from ..fit._signal import dominant_peaks
+
+    return [round(p.frequency_hz, 3) for p in dominant_peaks(t, x, n=n)]
