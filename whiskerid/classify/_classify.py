@@ -18,13 +18,13 @@
   network sizes) and ``weights.npz``; no pickle anywhere.
 """
 
+import functools
 import json
 import sys
 import zipfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -32,8 +32,16 @@ from tqdm import tqdm
 
 from .._version import __version__
 from ..io._recording import Recording, RecordingError, check_samples, read_recording
-from ._features import FeatureSpec, compute_features, window_features
-from ._mlp import MLP, TrainConfig, default_config, from_arrays, to_arrays, train_mlp
+from ._features import FeatureSpec, batch_features, compute_features, window_features
+from ._mlp import (
+    MLP,
+    TrainConfig,
+    default_config,
+    from_arrays,
+    pad_rows,
+    to_arrays,
+    train_mlp,
+)
 
 MODEL_FORMAT = "whiskerid.classifier/2"  # /2: spectral-shape and envelope features
 MODEL_JSON = "model.json"
@@ -556,6 +564,29 @@ def fuse_context(
 
 
 # --------------------------------------------------------------------------- model
+def _mean_proba(nets, z):
+    """The ensemble's mean class probabilities of standardised features ``z`` (one row or
+    a batch)."""
+    if z.ndim == 1:
+        return sum(jax.nn.softmax(n(z)) for n in nets) / len(nets)
+    return sum(jax.nn.softmax(jax.vmap(n)(z), axis=-1) for n in nets) / len(nets)
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _batch_proba(structure, numbers, nets, mean, std, windows, speeds):
+    """Class probabilities of a batch of windows: compiled once per feature structure,
+    network sizes and (padded) batch shape, for every model of that architecture."""
+    feats = batch_features(structure, numbers, windows, speeds)
+    return _mean_proba(nets, (feats.astype(jnp.float32) - mean) / std)
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _window_proba(structure, numbers, nets, mean, std, window, speed):
+    """Class probabilities of one window (see :func:`_batch_proba`)."""
+    feats = window_features(structure, window, speed, numbers)
+    return _mean_proba(nets, (feats.astype(jnp.float32) - mean) / std)
+
+
 class ClassifierModel:
     """A trained terrain classifier: feature spec, normalisation, network, labels.
 
@@ -583,27 +614,10 @@ class ClassifierModel:
         self.channel = channel
         self.info = dict(info or {})
         self.context_s = self.window_s if context_s is None else context_s
-        spec_ = spec
-
-        @eqx.filter_jit
-        def proba(nets, mean, std, windows, speeds):
-            feats = jax.vmap(lambda w, v: window_features(spec_, w, v))(windows, speeds)
-            z = (feats.astype(jnp.float32) - mean) / std
-            return sum(jax.nn.softmax(jax.vmap(n)(z), axis=-1) for n in nets) / len(nets)
-
-        self._proba = proba
-        params, static = eqx.partition(self.nets, eqx.is_array)
-
-        @jax.jit
-        def one(params, mean, std, window, speed):
-            feats = window_features(spec_, window, speed)
-            z = (feats.astype(jnp.float32) - mean) / std
-            nets = eqx.combine(params, static)
-            return sum(jax.nn.softmax(n(z)) for n in nets) / len(nets)
-
-        # Device-resident arguments: a warm call is one dispatch and one small transfer.
-        self._one = one
-        self._one_args = (params, jnp.asarray(self.mean), jnp.asarray(self.std))
+        # Device-resident arguments of the module-level compiled functions, which depend on
+        # the architecture only: a warm call is one dispatch and one small transfer.
+        self._structure = spec.structure()
+        self._args = (spec.numbers(), self.nets, jnp.asarray(self.mean), jnp.asarray(self.std))
 
     @property
     def rate_hz(self) -> float:
@@ -643,24 +657,31 @@ class ClassifierModel:
         """Whether windows must come with the robot speed."""
         return self.spec.kind == "fitted" and self.spec.use_speed
 
-    def _speeds(self, n: int, speeds) -> jax.Array:
+    def _speeds(self, n: int, speeds) -> np.ndarray:
         if speeds is None:
             if self.needs_speed:
                 raise ValueError("this model needs the robot speed (m/s) of each window")
-            return jnp.full(n, jnp.nan)
+            return np.full(n, np.nan)
         speeds = np.broadcast_to(np.asarray(speeds, dtype=float), (n,))
         if self.needs_speed:
             check_speed(speeds)
-        return jnp.asarray(speeds)
+        return speeds
 
     def predict_proba(self, windows, speeds=None) -> np.ndarray:
         """Class probabilities, shape ``(n, classes)``, for windows ``(n, window)``."""
-        windows = jnp.asarray(windows, dtype=float)
+        windows = np.asarray(windows, dtype=float)
         if windows.shape[1:] != self.spec.window_shape:
             shape = ", ".join(map(str, ("n", *self.spec.window_shape)))
             raise ValueError(f"windows must have shape ({shape}), got {windows.shape}")
-        p = self._proba(self.nets, self.mean, self.std, windows, self._speeds(len(windows), speeds))
-        return np.asarray(p)
+        speeds = self._speeds(len(windows), speeds)
+        n = len(windows)
+        if n == 0:
+            return np.zeros((0, len(self.labels)), np.float32)
+        # Padded (repeating the last window) to a size class: one compilation serves
+        # recordings and datasets of many lengths.
+        rows = np.minimum(np.arange(pad_rows(n)), n - 1)
+        p = _batch_proba(self._structure, *self._args, windows[rows], speeds[rows])
+        return np.asarray(p)[:n]
 
     def predict_windows(self, windows, speeds=None) -> tuple[np.ndarray, np.ndarray]:
         """Class index and confidence (its probability) per window."""
@@ -692,7 +713,7 @@ class ClassifierModel:
         if self.needs_speed:
             check_speed(speed)
         v = np.float64(np.nan if speed is None else speed)
-        return np.asarray(self._one(*self._one_args, x, v))
+        return np.asarray(_window_proba(self._structure, *self._args, x, v))
 
     def classify_recording(self, rec: Recording, *, speed: float | None = None) -> dict:
         """Labels of every window of a recording, and one for the whole (mean probability).
