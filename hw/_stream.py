@@ -139,7 +139,7 @@ class OnlineClassifier:
 
     def classify(self, pending: PendingWindow) -> WindowLabel:
         """Run the model on a cut window (features + MLP) and fuse its context."""
-        from ..classify._classify import fuse_context
+        from ..classify import fuse_context
 
         p = self.model.window_proba(pending.samples, self.speed)
         lookback = getattr(self.model, "lookback_s", 0.0)

@@ -11,15 +11,16 @@ import numpy as np
 import pytest
 
 import whiskerid as wi
-from whiskerid.classify import _mlp
-from whiskerid.classify._classify import (
+from whiskerid.classify import (
+    TrainConfig,
+    _mlp,
     confusion_matrix,
     default_spec,
     format_confusion,
     grouped_split,
     recording_folds,
 )
-from whiskerid.classify._mlp import TrainConfig, train_mlp
+from whiskerid.classify._mlp import train_mlp
 from whiskerid.cli._main import main
 
 FAST = TrainConfig(hidden=(32, 16), max_epochs=60, patience=20, batch_size=64)

@@ -13,7 +13,7 @@ them, and goes into model files):
   - spectrum of the standardised, Hann-windowed window: relative energies in ``n_bands``
     equal bands up to Nyquist (they sum to one), spectral centroid and flatness;
   - the dominant spectral peak and its side peaks (the paper's "dominant frequency
-    sandwiched by two less dominant components", NOTES §2): frequency with parabolic
+    sandwiched by two less dominant components"): frequency with parabolic
     sub-bin interpolation of the log amplitude, relative amplitude and half-power width;
   - fitted modal quantities: a single-mode resonance
     ``P(f) = A²/((1 − r²)² + (2ζr)²) + c``, ``r = f/f_n``, fitted to each window's power
@@ -29,11 +29,11 @@ them, and goes into model files):
     inside the first equal-width band). Used with the speed: without it, a level says
     as much about how fast a run went as about the ground;
   - when the speed ``v`` is known (``use_speed``): a texture of wavelength ``λ`` appears at
-    ``f = v/λ`` (NOTES §5), so the spectrum is also summarised on the *spatial* frequency
-    ``n = f/v`` (cycles/m): relative energies in log-spaced bands over
-    ``[spatial_lo, spatial_hi]``, the dominant peak and the centroid as log spatial
-    frequencies, and the RMS divided by ``v²`` (base acceleration for a given profile
-    grows as ``v²``).
+    ``f = v/λ`` (the robot passes ``v/λ`` wavelengths a second), so the spectrum is also
+    summarised on the *spatial* frequency ``n = f/v`` (cycles/m): relative energies in
+    log-spaced bands over ``[spatial_lo, spatial_hi]``, the dominant peak and the centroid
+    as log spatial frequencies, and the RMS divided by ``v²`` (base acceleration for a
+    given profile grows as ``v²``).
 
 Frequencies are given as fractions of Nyquist, so a spec is meaningful at its own rate only;
 model files record the rate and recordings are resampled to it.

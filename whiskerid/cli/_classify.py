@@ -5,7 +5,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from ..classify._features import FEATURE_KINDS
+from .._choices import FEATURE_KINDS
 from ..io._recording import check_out_path
 
 _FMT = argparse.ArgumentDefaultsHelpFormatter
@@ -172,8 +172,7 @@ def _cmd_synth(args) -> dict:
 
 
 def _cmd_train(args) -> dict:
-    from ..classify._classify import cross_validate, load_dataset, train_classifier
-    from ..classify._mlp import default_config
+    from ..classify import cross_validate, default_config, load_dataset, train_classifier
 
     if args.window <= 0:
         raise CommandError("--window must be positive")
@@ -234,7 +233,7 @@ def _cmd_train(args) -> dict:
 
 
 def _load_model(path, context_s=None):
-    from ..classify._classify import ClassifierModel
+    from ..classify import ClassifierModel
 
     model = ClassifierModel.load(path)
     if context_s is not None:
@@ -243,7 +242,9 @@ def _load_model(path, context_s=None):
 
 
 def _cmd_evaluate(args) -> dict:
-    from ..classify._classify import evaluate, format_confusion, load_dataset, plot_confusion
+    from ..classify import evaluate_classifier as evaluate
+    from ..classify import format_confusion, load_dataset
+    from ..plot._classify import plot_confusion
 
     if args.plot is not None:  # before any work
         check_out_path(args.plot, "--plot", inputs={"MODEL": args.model, "DATASET": args.dataset})

@@ -131,7 +131,7 @@ def _cmd_simulate(args) -> dict:
         if args.base is None:
             raise CommandError("--excitation base needs --base FILE (time and base acceleration)")
         rec = read_recording(args.base)
-        from ..classify._classify import recording_rate
+        from ..classify import recording_rate
         from ..io._recording import check_samples
 
         acc = rec.signal(args.base_col)

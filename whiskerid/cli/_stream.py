@@ -61,7 +61,7 @@ def add_stream(sub, command_error) -> None:
 
 def _cmd_stream(args, command_error) -> dict:
     from .. import hw
-    from ..classify._classify import ClassifierModel
+    from ..classify import ClassifierModel
     from ..hw._stream import OnlineClassifier, open_recorder, run_stream, terrain_source
 
     _check_numbers(args, command_error)
