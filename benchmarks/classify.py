@@ -13,8 +13,13 @@ import time
 import numpy as np
 
 import whiskerid as wi
-from whiskerid.classify._classify import default_spec, features_of, fit_on_features
-from whiskerid.classify._mlp import TrainConfig, default_config
+from whiskerid.classify import (
+    TrainConfig,
+    default_config,
+    default_spec,
+    features_of,
+    fit_on_features,
+)
 from whiskerid.terrain._terrain import RunSpec
 
 

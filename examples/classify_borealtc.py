@@ -39,16 +39,16 @@ from pathlib import Path
 import numpy as np
 
 import whiskerid as wi
-from whiskerid.classify._classify import (
+from whiskerid.classify import (
+    default_config,
     default_spec,
     evaluate_features,
     features_of,
     fit_on_features,
     format_confusion,
     grouped_split,
-    plot_confusion,
 )
-from whiskerid.classify._mlp import default_config
+from whiskerid.plot import plot_confusion
 
 REPO = Path(__file__).resolve().parent.parent
 #: Weight decay of our network here (the library's default, 1, was chosen on the synthetic

@@ -37,15 +37,15 @@ from pathlib import Path
 import numpy as np
 
 import whiskerid as wi
-from whiskerid.classify._classify import (
+from whiskerid.classify import (
+    default_config,
     default_spec,
     evaluate_features,
     features_of,
     fit_on_features,
     format_confusion,
-    plot_confusion,
 )
-from whiskerid.classify._mlp import default_config
+from whiskerid.plot import plot_confusion
 
 
 def _fit(train, kind, seed):

@@ -1,6 +1,9 @@
 """MLP, model files, evaluation and the classification CLI on a tiny dataset."""
 
+import collections
 import json
+import logging
+import re
 from dataclasses import replace
 
 import jax
@@ -8,15 +11,16 @@ import numpy as np
 import pytest
 
 import whiskerid as wi
-from whiskerid.classify import _mlp
-from whiskerid.classify._classify import (
+from whiskerid.classify import (
+    TrainConfig,
+    _mlp,
     confusion_matrix,
     default_spec,
     format_confusion,
     grouped_split,
     recording_folds,
 )
-from whiskerid.classify._mlp import TrainConfig, train_mlp
+from whiskerid.classify._mlp import train_mlp
 from whiskerid.cli._main import main
 
 FAST = TrainConfig(hidden=(32, 16), max_epochs=60, patience=20, batch_size=64)
@@ -394,3 +398,48 @@ def test_multichannel_model_round_trip(tmp_path):
     assert label == model.labels[int(np.argmax(model.predict_proba(ws2.windows[:1])[0]))]
     with pytest.raises(ValueError, match=r"\(2, 200\)"):
         loaded.predict_window(ws2.windows[0, 1])
+
+
+class _Compiles(logging.Handler):
+    """Counts JAX compilations by function name while installed (``jax.log_compiles``)."""
+
+    def __init__(self):
+        super().__init__()
+        self.names = collections.Counter()
+
+    def emit(self, record):
+        found = re.search(r"Compiling jit\((\w+)\)", record.getMessage())
+        if found:
+            self.names[found.group(1)] += 1
+
+    def __enter__(self):
+        self._ctx = jax.log_compiles(True)
+        self._ctx.__enter__()
+        logging.getLogger("jax").addHandler(self)
+        return self.names
+
+    def __exit__(self, *exc):
+        logging.getLogger("jax").removeHandler(self)
+        self._ctx.__exit__(*exc)
+
+
+def test_one_compilation_per_architecture(tmp_path):
+    """Models of one architecture share compiled functions: loading a model file twice, or
+    a second model with other weights, compiles nothing more; nor do cross-validation folds
+    of other sizes or other numeric training settings."""
+    ws = _toy_windows(n_rec=6, per=8)
+    cfg = replace(FAST, max_epochs=20)  # compiled for other tests too
+    for seed in (0, 1):
+        wi.train_classifier(ws, config=replace(cfg, seed=seed)).save(tmp_path / f"m{seed}")
+    with _Compiles() as compiled:
+        for folder in ("m0", "m0", "m1"):
+            model = wi.ClassifierModel.load(tmp_path / folder)
+            for n in (3, 5, 7):  # recordings of several lengths: one size class
+                model.predict_proba(ws.windows[:n])
+            model.predict_window(ws.windows[0])
+    assert compiled["_batch_proba"] <= 1 and compiled["_window_proba"] <= 1, compiled
+    wi.cross_validate(ws, folds=3, config=cfg)
+    with _Compiles() as compiled:  # other folds, step size and regularisation
+        other = replace(cfg, learning_rate=1e-2, weight_decay=0.1, input_noise=0.1, seed=5)
+        wi.cross_validate(ws, folds=3, seed=3, config=other)
+    assert not {"_run_chunk", "_predict_proba", "_batch_features"} & set(compiled), compiled

@@ -6,17 +6,14 @@ import numpy as np
 import pytest
 
 import whiskerid as wi
-from whiskerid.classify._classify import (
-    _speed,
+from whiskerid.classify import FeatureSpec, TrainConfig, compute_features, confusion_matrix, scores
+from whiskerid.classify._dataset import (
     check_speed,
-    confusion_matrix,
     load_dataset,
     recording_signal,
-    scores,
+    recording_speed,
     windows_of,
 )
-from whiskerid.classify._features import FeatureSpec, compute_features
-from whiskerid.classify._mlp import TrainConfig
 
 
 def _rec(path, *, rate=200.0, seconds=4.0, f=20.0, scale=1.0, meta=None, columns=("adc",)):
@@ -136,8 +133,8 @@ def test_flat_lined_sensor_gives_finite_features():
 
 def test_speeds_must_be_positive_numbers():
     with pytest.raises(wi.RecordingError, match="speed_mps 'fast' is not a positive"):
-        _speed(wi.Recording(t=np.arange(3.0), columns={}, meta={"speed_mps": "fast"}))
-    assert np.isnan(_speed(wi.Recording(t=np.arange(3.0), columns={})))
+        recording_speed(wi.Recording(t=np.arange(3.0), columns={}, meta={"speed_mps": "fast"}))
+    assert np.isnan(recording_speed(wi.Recording(t=np.arange(3.0), columns={})))
     for bad in (0.0, -0.2, np.nan, np.inf):
         with pytest.raises(ValueError, match="must be a positive number"):
             check_speed(bad)

@@ -1,19 +1,41 @@
-"""Terrain classification: features, the MLP, datasets, model files, training and evaluation."""
+"""Terrain classification: datasets of windows, features, the MLP, training, evaluation,
+context fusion and model files.
+
+The modules, along the data path: ``_dataset`` (recordings → labelled windows at one rate),
+``_features`` (a feature vector per window), ``_mlp`` (the network and its training loop),
+``_split`` (splits and folds by recording), ``_train`` (a :class:`ClassifierModel` from
+windows), ``_model_file`` (the model, its compiled predict functions and its files),
+``_context`` (labels fused over consecutive windows), ``_evaluate`` (scores,
+cross-validation, the paper's protocol) and ``_borealtc`` (a public IMU dataset).
+"""
 
 from .. import _jax_setup as _jax_setup
 from ._borealtc import load_borealtc as load_borealtc
-from ._classify import ClassifierModel as ClassifierModel
-from ._classify import ModelError as ModelError
-from ._classify import WindowSet as WindowSet
-from ._classify import cross_validate as cross_validate
-from ._classify import evaluate_classifier as evaluate_classifier
-from ._classify import fuse_context as fuse_context
-from ._classify import load_dataset as load_dataset
-from ._classify import paper_protocol as paper_protocol
-from ._classify import recording_scores as recording_scores
-from ._classify import split_by_recording as split_by_recording
-from ._classify import train_classifier as train_classifier
+from ._context import fuse_context as fuse_context
+from ._dataset import WindowSet as WindowSet
+from ._dataset import load_dataset as load_dataset
+from ._dataset import recording_rate as recording_rate
+from ._dataset import timestamp_rate as timestamp_rate
+from ._evaluate import confusion_matrix as confusion_matrix
+from ._evaluate import cross_validate as cross_validate
+from ._evaluate import evaluate_classifier as evaluate_classifier
+from ._evaluate import evaluate_features as evaluate_features
+from ._evaluate import format_confusion as format_confusion
+from ._evaluate import paper_protocol as paper_protocol
+from ._evaluate import recording_scores as recording_scores
+from ._evaluate import scores as scores
 from ._features import FeatureSpec as FeatureSpec
 from ._features import band_energies as band_energies
 from ._features import compute_features as compute_features
 from ._features import spectral_peaks as spectral_peaks
+from ._mlp import TrainConfig as TrainConfig
+from ._mlp import default_config as default_config
+from ._model_file import ClassifierModel as ClassifierModel
+from ._model_file import ModelError as ModelError
+from ._split import grouped_split as grouped_split
+from ._split import recording_folds as recording_folds
+from ._split import split_by_recording as split_by_recording
+from ._train import default_spec as default_spec
+from ._train import features_of as features_of
+from ._train import fit_on_features as fit_on_features
+from ._train import train_classifier as train_classifier

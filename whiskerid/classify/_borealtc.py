@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io._recording import RecordingError
-from ._classify import WindowSet, cut_windows
+from ._dataset import WindowSet, cut_windows
 
 DEFAULT_ROOT = Path(__file__).resolve().parents[3] / "shared" / "data" / "borealtc"
 IMU_CHANNELS = ("wx", "wy", "wz", "ax", "ay", "az")

@@ -13,7 +13,7 @@ them, and goes into model files):
   - spectrum of the standardised, Hann-windowed window: relative energies in ``n_bands``
     equal bands up to Nyquist (they sum to one), spectral centroid and flatness;
   - the dominant spectral peak and its side peaks (the paper's "dominant frequency
-    sandwiched by two less dominant components", NOTES §2): frequency with parabolic
+    sandwiched by two less dominant components"): frequency with parabolic
     sub-bin interpolation of the log amplitude, relative amplitude and half-power width;
   - fitted modal quantities: a single-mode resonance
     ``P(f) = A²/((1 − r²)² + (2ζr)²) + c``, ``r = f/f_n``, fitted to each window's power
@@ -29,22 +29,27 @@ them, and goes into model files):
     inside the first equal-width band). Used with the speed: without it, a level says
     as much about how fast a run went as about the ground;
   - when the speed ``v`` is known (``use_speed``): a texture of wavelength ``λ`` appears at
-    ``f = v/λ`` (NOTES §5), so the spectrum is also summarised on the *spatial* frequency
-    ``n = f/v`` (cycles/m): relative energies in log-spaced bands over
-    ``[spatial_lo, spatial_hi]``, the dominant peak and the centroid as log spatial
-    frequencies, and the RMS divided by ``v²`` (base acceleration for a given profile
-    grows as ``v²``).
+    ``f = v/λ`` (the robot passes ``v/λ`` wavelengths a second), so the spectrum is also
+    summarised on the *spatial* frequency ``n = f/v`` (cycles/m): relative energies in
+    log-spaced bands over ``[spatial_lo, spatial_hi]``, the dominant peak and the centroid
+    as log spatial frequencies, and the RMS divided by ``v²`` (base acceleration for a
+    given profile grows as ``v²``).
 
 Frequencies are given as fractions of Nyquist, so a spec is meaningful at its own rate only;
 model files record the rate and recordings are resampled to it.
+
+The compiled feature function depends on a spec's *structure* only (kind, window length,
+numbers of bands and peaks, which optional parts): its physical numbers (the rate and the
+spatial-frequency range) are traced arguments (:class:`Numbers`), so models of one
+structure at other rates, or with other training speeds, share one compilation.
 """
 
-import functools
-from dataclasses import asdict, dataclass
-from typing import Literal
+from dataclasses import asdict, dataclass, replace
+from typing import Literal, NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
 from .._choices import FEATURE_KINDS
@@ -142,6 +147,50 @@ class FeatureSpec:
             raise ValueError(f"unknown feature settings {sorted(extra)}")
         return cls(**d)
 
+    def structure(self) -> "FeatureSpec":
+        """This spec with its physical numbers (:class:`Numbers`) set to the defaults: what
+        a compiled feature function depends on, and its cache key."""
+        return replace(self, rate_hz=_DEFAULT.rate_hz, spatial_lo=_DEFAULT.spatial_lo,
+                       spatial_hi=_DEFAULT.spatial_hi)  # fmt: skip
+
+    def numbers(self) -> "Numbers":
+        """The physical numbers of this spec, as float64 arrays (traced when jitted).
+
+        The bin frequencies and spacing and the reciprocal of Nyquist are computed here, on
+        the host, with correctly rounded divisions: compiled code divides by a traced
+        number through an inexact reciprocal, and the features would move in their last
+        digit against those of a spec whose numbers are constants.
+        """
+        n = self.window
+        freqs = np.arange(n // 2 + 1, dtype=np.float64) / np.float64(1.0 / self.rate_hz * n)
+        values = (self.rate_hz, self.rate_hz / n, freqs[1:], 2.0 / self.rate_hz,
+                  self.spatial_lo, self.spatial_hi)  # fmt: skip
+        return Numbers(*(jnp.asarray(v, dtype=jnp.float64) for v in values))
+
+
+class Numbers(NamedTuple):
+    """The physical numbers of a :class:`FeatureSpec`: no shape depends on them, so they
+    are traced arguments of the compiled feature functions, not compile-time constants."""
+
+    rate_hz: Float[Array, ""]
+    df_hz: Float[Array, ""]
+    freqs_hz: Float[Array, " bins"]
+    per_nyquist: Float[Array, ""]
+    spatial_lo: Float[Array, ""]
+    spatial_hi: Float[Array, ""]
+
+
+_DEFAULT = FeatureSpec()
+
+
+def octave_edges(window: int, rate_hz, df_hz) -> Float[Array, " edges"]:
+    """:meth:`FeatureSpec.octave_edges` for a traced rate: how many edges there are
+    depends on the window length only (Nyquist is ``window / 2`` bins)."""
+    count = len(replace(_DEFAULT, window=window).octave_edges())
+    df = df_hz
+    doublings = jnp.asarray([2.0**j for j in range(count - 1)])
+    return jnp.concatenate([df * doublings, jnp.reshape(rate_hz / 2, (1,))])
+
 
 def standardise(x: Float[Array, " window"]) -> Float[Array, " window"]:
     """Zero mean, unit standard deviation (a constant window stays at zero)."""
@@ -160,11 +209,15 @@ def power_spectrum(x: Float[Array, " window"], rate_hz: float):
     Returns:
         ``(freqs_hz, power)``, bins 1 … ``window // 2``.
     """
+    f = jnp.fft.rfftfreq(x.shape[-1], 1.0 / rate_hz)
+    return f[1:], _power(x)
+
+
+def _power(x: Float[Array, " window"]) -> Float[Array, " bins"]:
+    """The power of :func:`power_spectrum`."""
     n = x.shape[-1]
     w = jnp.hanning(n)
-    p = jnp.abs(jnp.fft.rfft(standardise(x) * w)) ** 2 / jnp.sum(w**2)
-    f = jnp.fft.rfftfreq(n, 1.0 / rate_hz)
-    return f[1:], p[1:]
+    return (jnp.abs(jnp.fft.rfft(standardise(x) * w)) ** 2 / jnp.sum(w**2))[1:]
 
 
 def band_energies(
@@ -281,10 +334,17 @@ def _closed_form_mode(freqs, power, pf, pw):
 
 
 def fitted_features(
-    spec: FeatureSpec, x: Float[Array, " window"], speed_mps
+    spec: FeatureSpec, x: Float[Array, " window"], speed_mps, numbers: Numbers | None = None
 ) -> Float[Array, " features"]:
-    """The ``fitted`` feature vector of one window (see the module docstring)."""
-    nyq = spec.rate_hz / 2
+    """The ``fitted`` feature vector of one window (see the module docstring).
+
+    ``numbers`` replaces the spec's physical numbers (traced ones, inside a compiled
+    function); the spec's own by default.
+    """
+    num = spec.numbers() if numbers is None else numbers
+    rate_hz = num.rate_hz
+    nyq = rate_hz / 2
+    per_nyq = num.per_nyquist  # 1 / nyq, correctly rounded (see FeatureSpec.numbers)
     n = x.shape[-1]
     x0 = x - jnp.mean(x)
     rms = jnp.maximum(jnp.std(x0), _EPS)
@@ -298,7 +358,7 @@ def fitted_features(
         jnp.mean(jnp.signbit(z[1:]) != jnp.signbit(z[:-1])),
         jnp.std(jnp.diff(z)),
     ]
-    freqs, power = power_spectrum(x, spec.rate_hz)
+    freqs, power = num.freqs_hz, _power(x)
     edges = jnp.linspace(0.0, nyq, spec.n_bands + 1).at[-1].set(nyq)
     bands = jnp.log(band_energies(freqs, power, edges) + 1e-4)
     total = jnp.maximum(jnp.sum(power), _EPS)
@@ -315,7 +375,7 @@ def fitted_features(
     slope = jnp.sum(lfc * (lp - jnp.mean(lp))) / jnp.sum(lfc**2)
     resid = jnp.std(lp - jnp.mean(lp) - slope * lfc)
     peak_floor = jnp.log(jnp.max(power) + _EPS) - jnp.log(jnp.median(power) + _EPS)
-    shape_feats = [spread / nyq, entropy, rolloff / nyq, slope, resid, peak_floor]
+    shape_feats = [spread * per_nyq, entropy, rolloff * per_nyq, slope, resid, peak_floor]
     # Broadband part: a running median over 5 bins removes narrow lines (the drivetrain's
     # motor tone and harmonics, class-independent) and keeps the terrain's broadband
     # content; its level, its share of the power and its coarse band shape.
@@ -333,7 +393,7 @@ def fitted_features(
     e0 = env - env_mean
     env_ac = _autocorr(e0)
     sig_ac = _autocorr(z)
-    lo = max(round(0.05 * spec.rate_hz), 2)
+    lo = jnp.maximum(jnp.round(0.05 * rate_hz), 2)
     lags = jnp.arange(n)
     usable = (lags >= lo) & (lags <= n // 2)
     env_ac_u = jnp.where(usable, env_ac, -jnp.inf)
@@ -346,14 +406,14 @@ def fitted_features(
         jnp.max(jnp.where(usable, jnp.abs(sig_ac), -jnp.inf)),
         env_ac[1],
     ]
-    df = spec.rate_hz / spec.window
+    df = num.df_hz
     amps = jnp.concatenate([jnp.zeros(1), jnp.sqrt(power)])  # bin k at k·df again
     pf, pa, pw = spectral_peaks(amps, df, spec.n_peaks)
-    peak_feats = jnp.concatenate([pf / nyq, jnp.log(pa / jnp.sqrt(total) + 1e-6), pw / nyq])
+    peak_feats = jnp.concatenate([pf * per_nyq, jnp.log(pa / jnp.sqrt(total) + 1e-6), pw * per_nyq])
     parts = [
         jnp.stack(time_feats),
         bands,
-        jnp.stack([centroid / nyq, flatness]),
+        jnp.stack([centroid * per_nyq, flatness]),
         jnp.stack(shape_feats),
         jnp.stack(broad_feats),
         b_bands,
@@ -365,17 +425,17 @@ def fitted_features(
     if spec.modal_fit:
         fd, zeta, amp, floor, ok = fit_resonance(freqs, power, pf[0])
         parts.append(
-            jnp.stack([fd / nyq, zeta, jnp.log(amp + _EPS) + log_rms,
+            jnp.stack([fd * per_nyq, zeta, jnp.log(amp + _EPS) + log_rms,
                        jnp.log(floor + _EPS) - 2 * jnp.log(amp + _EPS), ok.astype(float)])
         )  # fmt: skip
     if spec.octave_bands:
         # Shares of the standardised window's power, times its total and the variance:
         # the raw window's power per octave.
-        o_share = band_energies(freqs, power, jnp.asarray(spec.octave_edges()))
+        o_share = band_energies(freqs, power, octave_edges(spec.window, rate_hz, num.df_hz))
         parts.append(jnp.log(o_share + 1e-8) + jnp.log(total) + 2 * log_rms)
     if spec.use_speed:
         v = jnp.asarray(speed_mps, dtype=float)
-        s_edges = jnp.geomspace(spec.spatial_lo, spec.spatial_hi, spec.n_spatial_bands + 1)
+        s_edges = jnp.geomspace(num.spatial_lo, num.spatial_hi, spec.n_spatial_bands + 1)
         s_bands = jnp.log(band_energies(freqs / v, power, s_edges) + 1e-4)
         parts.append(s_bands)
         parts.append(jnp.stack([jnp.log(jnp.maximum(pf[0], df) / v),
@@ -385,28 +445,28 @@ def fitted_features(
     return jnp.concatenate(parts)
 
 
-def window_features(spec: FeatureSpec, x, speed_mps=jnp.nan):
+def window_features(spec: FeatureSpec, x, speed_mps=jnp.nan, numbers: Numbers | None = None):
     """Feature vector of one window for either pipeline.
 
     ``x`` has shape ``spec.window_shape``: ``(window,)``, or ``(channels, window)`` whose
-    channels are featurised alike and concatenated.
+    channels are featurised alike and concatenated. ``numbers``: as in
+    :func:`fitted_features`.
     """
     if x.ndim == 2:
-        return jax.vmap(lambda c: window_features(spec, c, speed_mps))(x).reshape(-1)
+        return jax.vmap(lambda c: window_features(spec, c, speed_mps, numbers))(x).reshape(-1)
     if spec.kind == "paper":
         return paper_features(x)
-    return fitted_features(spec, x, speed_mps)
+    return fitted_features(spec, x, speed_mps, numbers)
 
 
-@functools.lru_cache(maxsize=32)
-def feature_function(spec: FeatureSpec):
-    """A jitted ``(windows (n, window), speeds (n,)) -> (n, n_features)`` for ``spec``."""
+def batch_features(structure: FeatureSpec, numbers: Numbers, windows, speeds):
+    """Features of windows ``(n, *window_shape)`` with speeds ``(n,)``: traceable, for use
+    inside compiled functions (``structure`` from :meth:`FeatureSpec.structure`)."""
+    return jax.vmap(lambda w, v: window_features(structure, w, v, numbers))(windows, speeds)
 
-    @jax.jit
-    def fn(windows, speeds):
-        return jax.vmap(lambda w, v: window_features(spec, w, v))(windows, speeds)
 
-    return fn
+#: Compiled once per spec structure and batch shape.
+_batch_features = jax.jit(batch_features, static_argnums=0)
 
 
 def compute_features(spec: FeatureSpec, windows, speeds=None) -> jax.Array:
@@ -427,4 +487,4 @@ def compute_features(spec: FeatureSpec, windows, speeds=None) -> jax.Array:
             raise ValueError("these features need the robot speed (speed_mps) of each window")
         speeds = jnp.full(windows.shape[0], jnp.nan)
     speeds = jnp.broadcast_to(jnp.asarray(speeds, dtype=float), (windows.shape[0],))
-    return feature_function(spec)(windows, speeds)
+    return _batch_features(spec.structure(), spec.numbers(), windows, speeds)

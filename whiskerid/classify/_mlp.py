@@ -8,13 +8,18 @@ Training is full-batch Adam by default (minibatches optional); one jitted call r
 chunk of epochs in ``lax.scan`` and tracks the validation loss, keeping the best
 parameters; the host stops once the validation loss has not improved for ``patience``
 epochs. Training and validation rows live in one padded array, told apart by row
-weights, so one compilation serves every split of the same size class. Networks run
-in float32 (the features are standardised, and float32 halves the CPU time).
+weights, so one compilation serves every split of the same size class. The training
+settings that are numbers (learning rate, weight decay, input noise) are traced
+arguments, not compile-time constants: a compilation depends on the layer sizes, the
+padded number of rows, the batch size, the epochs per chunk and the label smoothing only.
+The label smoothing stays a constant: at its default, 0, XLA simplifies the loss and its
+gradient, and a traced 0 would move trained weights in their last digits. Networks run in
+float32 (the features are standardised, and float32 halves the CPU time).
 """
 
-import functools
 import itertools
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -178,11 +183,26 @@ class TrainResult:
     history: list[float]
 
 
-@functools.lru_cache(maxsize=8)
-def _optimizer(learning_rate: float, weight_decay: float):
-    # Cached: the optimiser is a static argument of the jitted chunk, so a new one each
-    # call would recompile.
-    return optax.adamw(learning_rate, weight_decay=weight_decay)
+class _Settings(NamedTuple):
+    """The numeric training settings: float32 scalars traced by the jitted chunk, and the
+    label smoothing, a Python float and so a constant of it (see the module docstring)."""
+
+    learning_rate: Float[Array, ""]
+    weight_decay: Float[Array, ""]
+    input_noise: Float[Array, ""]
+    label_smoothing: float
+
+    @classmethod
+    def of(cls, config: "TrainConfig") -> "_Settings":
+        values = (config.learning_rate, config.weight_decay, config.input_noise)
+        traced = (jnp.asarray(v, jnp.float32) for v in values)
+        return cls(*traced, float(config.label_smoothing))
+
+
+def _optimizer(settings: _Settings):
+    """AdamW with the (traced) step size and weight decay; its state does not depend on
+    them, so one built from any numbers initialises it."""
+    return optax.adamw(settings.learning_rate, weight_decay=settings.weight_decay)
 
 
 def _loss(model, x, y, weights, smoothing=0.0):
@@ -194,8 +214,8 @@ def _loss(model, x, y, weights, smoothing=0.0):
 
 
 @eqx.filter_jit
-def _run_chunk(params, static, opt_state, best, key, data, n_epochs: int, batch: int, opt,
-               noise: float, smoothing: float):  # fmt: skip
+def _run_chunk(params, static, opt_state, best, key, data, settings: _Settings, n_epochs: int,
+               batch: int):  # fmt: skip
     """``n_epochs`` epochs of Adam; keeps the parameters of the best validation loss.
 
     ``data = (x, y, w_train, w_val)``: training and validation rows share one array and
@@ -204,6 +224,7 @@ def _run_chunk(params, static, opt_state, best, key, data, n_epochs: int, batch:
     paper protocol and the folds of an evaluation reuse one compilation.
     """
     x, y, w_train, w_val, bank, epoch0 = data
+    opt, noise, smoothing = _optimizer(settings), settings.input_noise, settings.label_smoothing
     n = x.shape[0]
     n_batches = max(n // batch, 1)
 
@@ -294,8 +315,8 @@ def train_mlp(
     key = jax.random.key(config.seed, impl="rbg")
     model = init_mlp(x.shape[1], tuple(config.hidden), n_classes, config.seed)
     params, static = eqx.partition(model, eqx.is_array)
-    opt = _optimizer(config.learning_rate, config.weight_decay)
-    opt_state = opt.init(params)
+    settings = _Settings.of(config)
+    opt_state = _optimizer(settings).init(params)
     best = (params, jnp.asarray(jnp.inf, jnp.float32))
     batch = rows if config.batch_size <= 0 else min(config.batch_size, rows)
     history: list[float] = []
@@ -312,11 +333,9 @@ def train_mlp(
             best,
             sub,
             (*data, jnp.asarray(epochs, jnp.int32)),
+            settings,
             config.chunk,
             batch,
-            opt,
-            config.input_noise,
-            config.label_smoothing,
         )
         vals, better = np.asarray(vals), np.asarray(better)
         history.extend(float(v) for v in vals)
@@ -333,7 +352,27 @@ def train_mlp(
     return TrainResult(model, epochs, best_epoch, float(best[1]), acc, history)
 
 
+def predict_proba(model: MLP, x: Float[Array, "n features"]) -> np.ndarray:
+    """Class probabilities (softmax of the logits), shape ``(n, classes)``.
+
+    The rows are padded to :func:`pad_rows` (and the padding dropped), so that the
+    compiled function serves every batch of a size class: validation sets and folds of
+    different sizes do not each compile their own.
+    """
+    x = np.asarray(x, np.float32)
+    padded = np.zeros((pad_rows(len(x)), *x.shape[1:]), np.float32)
+    padded[: len(x)] = x
+    return np.asarray(_predict_proba(model, padded))[: len(x)]
+
+
 @eqx.filter_jit
-def predict_proba(model: MLP, x: Float[Array, "n features"]) -> Float[Array, "n classes"]:
-    """Class probabilities (softmax of the logits)."""
-    return jax.nn.softmax(jax.vmap(model)(jnp.asarray(x, jnp.float32)), axis=-1)
+def _predict_proba(model: MLP, x: Float[Array, "n features"]) -> Float[Array, "n classes"]:
+    return jax.nn.softmax(jax.vmap(model)(x), axis=-1)
+
+
+def pad_rows(n: int) -> int:
+    """Rows a batch of ``n`` is padded to: the next power of two from 8 to 256, then the
+    next multiple of 256 (few distinct compiled shapes, little wasted work)."""
+    if n > 256:
+        return _pad_rows(n)
+    return max(8, 1 << max(n - 1, 0).bit_length())

@@ -142,7 +142,7 @@ def _check_sampling(rec, record) -> None:
     """Refuse ``rate_hz`` metadata at odds with the timestamps, and sampling far too slow
     for the whisker's first mode (a time column in ms read as seconds is 1000 times too
     slow): a fit to either would end with numbers, all of them wrong."""
-    from ..classify._classify import recording_rate, timestamp_rate
+    from ..classify import recording_rate, timestamp_rate
     from ..io._recording import RecordingError
 
     recording_rate(rec)

@@ -40,7 +40,7 @@ def run(args) -> dict:
         f"{len(res['windows'])} windows)")  # fmt: skip
     out = {"recording": str(args.recording), **res}
     if args.plot is not None:
-        from ..plot._plot import plot_recording_labels
+        from ..plot import plot_recording_labels
 
         x = rec.columns[res["channel"]]  # checked by classify_recording
         title = f"{args.recording.name}: {res['label']} (mean probability {res['confidence']:.2f})"

@@ -44,7 +44,7 @@ def record_or_paper(path: Path | None):
 
 def load_model(path: Path, context_s: float | None = None):
     """A trained classifier, with the signal its labels rest on overridden if ``context_s``."""
-    from ..classify._classify import ClassifierModel
+    from ..classify import ClassifierModel
 
     model = ClassifierModel.load(path)
     if context_s is not None:

@@ -80,7 +80,7 @@ def run_demo(out: Path, *, plots: bool = True, say=print) -> dict:
             f"Hz folds to {abs(f_n[1] - 200 * round(f_n[1] / 200)):.1f} Hz at 200 Hz)"
         )
         if plots:
-            from ..plot._plot import plot_signal_and_spectrum
+            from ..plot import plot_signal_and_spectrum
 
             png = plot_signal_and_spectrum(
                 out / f"{label}_adc.png",
@@ -101,7 +101,7 @@ def run_demo(out: Path, *, plots: bool = True, say=print) -> dict:
         "recordings": recordings,
     }
     if plots:
-        from ..plot._plot import plot_modal_analysis
+        from ..plot import plot_modal_analysis
 
         for name, rows in cases.items():
             png = plot_modal_analysis(out / f"modal_analysis_{name}.png", rows)
@@ -199,7 +199,7 @@ def _posterior_stage(out: Path, record, obs, *, plots: bool, say) -> dict:
 def _stream_stage(out: Path, model_dir: Path, *, say, terrain: str = "brick") -> dict:
     """10 s of the Pi's loop on an emulated ADS1115 (virtual clock): sample, classify, record."""
     from .. import hw
-    from ..classify._classify import ClassifierModel
+    from ..classify import ClassifierModel
     from ..hw import OnlineClassifier, open_recorder, run_stream, terrain_source
 
     say(f"[7] online stream: emulated ADS1115 fed by the simulator on {terrain} at 0.2 m/s, 10 s")
@@ -225,14 +225,9 @@ def _stream_stage(out: Path, model_dir: Path, *, say, terrain: str = "brick") ->
 
 def _classification_stage(out: Path, *, plots: bool, say) -> dict:
     """Small synthetic terrain dataset (7 terrains, 0.2 m/s), trained and tested by recording."""
-    from ..classify._classify import (
-        evaluate,
-        format_confusion,
-        load_dataset,
-        plot_confusion,
-        split_by_recording,
-        train_classifier,
-    )
+    from ..classify import evaluate_classifier as evaluate
+    from ..classify import format_confusion, load_dataset, split_by_recording, train_classifier
+    from ..plot import plot_confusion
     from ..terrain._terrain import synthesize_dataset
 
     say("[6] terrain classification: 7 simulated terrains at 0.2 m/s, 16 runs x 6 s each")

@@ -30,8 +30,10 @@ def add_parser(sub) -> None:
 
 def run(args) -> dict:
     """Score the model and print its confusion matrix; returns the JSON summary."""
-    from ..classify._classify import evaluate, format_confusion, load_dataset, plot_confusion
+    from ..classify import evaluate_classifier as evaluate
+    from ..classify import format_confusion, load_dataset
     from ..io._recording import check_out_path
+    from ..plot import plot_confusion
 
     if args.plot is not None:  # before any work
         check_out_path(args.plot, "--plot", inputs={"MODEL": args.model, "DATASET": args.dataset})

@@ -120,7 +120,7 @@ def run(args) -> dict:
         "dominant_peaks_hz": _peaks(sim.t, x),
     }
     if args.plot:
-        from ..plot._plot import plot_signal_and_spectrum
+        from ..plot import plot_signal_and_spectrum
 
         plot_signal_and_spectrum(
             args.plot,
@@ -135,7 +135,7 @@ def run(args) -> dict:
 
 
 def _read_base_motion(path: Path, column: str | None):
-    from ..classify._classify import recording_rate
+    from ..classify import recording_rate
     from ..io._recording import check_samples, read_recording
     from ..model._simulate import BaseMotion
 

@@ -64,7 +64,7 @@ def add_parser(sub) -> None:
 def run(args) -> dict:
     """Stream until --duration, Ctrl-C or SIGTERM; returns the JSON summary."""
     from .. import hw
-    from ..classify._classify import ClassifierModel
+    from ..classify import ClassifierModel
     from ..hw import OnlineClassifier, open_recorder, run_stream, terrain_source
 
     _check_numbers(args)

@@ -83,7 +83,7 @@ def add_parser(sub) -> None:
 
 def run(args) -> dict:
     """Train (and cross-validate), write the model folder; returns the JSON summary."""
-    from ..classify._classify import cross_validate, load_dataset, train_classifier
+    from ..classify import cross_validate, load_dataset, train_classifier
 
     if args.window <= 0:
         raise CommandError("--window must be positive")
@@ -125,7 +125,7 @@ def _config(args):
     """The training settings: the feature kind's preset with the options given."""
     from dataclasses import replace
 
-    from ..classify._mlp import default_config
+    from ..classify import default_config
 
     config = replace(default_config(args.features), seed=args.seed)
     if args.max_epochs is not None:

@@ -1,0 +1,355 @@
+"""The trained classifier (:class:`ClassifierModel`) and its model files.
+
+:class:`ClassifierModel` is what a stream calls: :meth:`ClassifierModel.predict_window`
+(one window → label and confidence) and :meth:`ClassifierModel.predict_windows` (a batch).
+Both run module-level compiled functions whose cache key is the architecture (the feature
+spec's structure, the layer sizes, the number of ensemble members and the batch's size
+class): the model's numbers (weights, normalisation, rate) are traced arguments, so loading
+a model file again, or another model of the same architecture, compiles nothing.
+
+A model file is a folder with ``model.json`` (format, versions, feature spec, rate, window,
+hop, labels, normalisation, network sizes, training summary) and ``weights.npz``: arrays
+``m<member>_W<layer>`` and ``m<member>_b<layer>``, read with ``allow_pickle=False``; no pickle
+anywhere. The weights stay in NPZ rather than equinox's ``tree_serialise_leaves``: that format
+is an unnamed sequence of leaves whose meaning is the flattening order of the :class:`MLP`
+class (a change to the class would silently misread older files), it can only be read back
+into a skeleton built by equinox, and files written so far are NPZ and must keep loading. NPZ
+names every array, so each layer's presence and shape is checked with a message naming it,
+and any NumPy (a Pi without JAX, another language) can read a model.
+"""
+
+import functools
+import json
+import zipfile
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._version import __version__
+from ..io._recording import Recording, RecordingError
+from ._context import check_context, fuse_context
+from ._dataset import (
+    check_rate,
+    check_speed,
+    recording_signal,
+    recording_speed,
+    signal_column,
+    windows_of,
+)
+from ._features import FeatureSpec, batch_features, window_features
+from ._mlp import (
+    MLP,
+    from_arrays,
+    pad_rows,
+    to_arrays,
+)
+
+MODEL_FORMAT = "whiskerid.classifier/2"  # /2: spectral-shape and envelope features
+MODEL_JSON = "model.json"
+MODEL_WEIGHTS = "weights.npz"
+
+
+class ModelError(ValueError):
+    """A classifier model file that is missing, corrupt or from an incompatible version."""
+
+
+def _mean_proba(nets, z):
+    """The ensemble's mean class probabilities of standardised features ``z`` (one row or
+    a batch)."""
+    if z.ndim == 1:
+        return sum(jax.nn.softmax(n(z)) for n in nets) / len(nets)
+    return sum(jax.nn.softmax(jax.vmap(n)(z), axis=-1) for n in nets) / len(nets)
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _batch_proba(structure, numbers, nets, mean, std, windows, speeds):
+    """Class probabilities of a batch of windows: compiled once per feature structure,
+    network sizes and (padded) batch shape, for every model of that architecture."""
+    feats = batch_features(structure, numbers, windows, speeds)
+    return _mean_proba(nets, (feats.astype(jnp.float32) - mean) / std)
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _window_proba(structure, numbers, nets, mean, std, window, speed):
+    """Class probabilities of one window (see :func:`_batch_proba`)."""
+    feats = window_features(structure, window, speed, numbers)
+    return _mean_proba(nets, (feats.astype(jnp.float32) - mean) / std)
+
+
+class ClassifierModel:
+    """A trained terrain classifier: feature spec, normalisation, network, labels.
+
+    The online stream calls :meth:`predict_window` on each new window of ``window``
+    samples at ``rate_hz`` (uniformly resampled), or :meth:`predict_windows` on a batch.
+    ``net`` is one network or a sequence of them (an ensemble: their class probabilities
+    are averaged).
+
+    ``context_s`` is how much signal a label rests on: the window itself and the windows
+    that started up to ``context_s − window_s`` before it, fused by :func:`fuse_context`
+    (recordings, evaluation and the online stream alike). Equal to the window length,
+    every window is labelled on its own, as in the paper.
+    """
+
+    def __init__(self, spec: FeatureSpec, labels, mean, std, net: "MLP | list[MLP]", *,
+                 hop: int, channel: str | None = None, info: dict | None = None,
+                 context_s: float | None = None):  # fmt: skip
+        self.spec = spec
+        self.labels = tuple(labels)
+        self.mean = np.asarray(mean, dtype=np.float32)
+        self.std = np.asarray(std, dtype=np.float32)
+        self.nets = (net,) if isinstance(net, MLP) else tuple(net)
+        self.net = self.nets[0]
+        self.hop = int(hop)
+        self.channel = channel
+        self.info = dict(info or {})
+        self.context_s = self.window_s if context_s is None else context_s
+        # Device-resident arguments of the module-level compiled functions, which depend on
+        # the architecture only: a warm call is one dispatch and one small transfer.
+        self._structure = spec.structure()
+        self._args = (spec.numbers(), self.nets, jnp.asarray(self.mean), jnp.asarray(self.std))
+
+    @property
+    def rate_hz(self) -> float:
+        """Sample rate the model expects (Hz)."""
+        return self.spec.rate_hz
+
+    @property
+    def window(self) -> int:
+        """Samples per window."""
+        return self.spec.window
+
+    @property
+    def window_s(self) -> float:
+        """Window length (s)."""
+        return self.spec.window / self.spec.rate_hz
+
+    @property
+    def context_s(self) -> float:
+        """Signal a label rests on (s), at least one window (see the class docstring)."""
+        return self._context_s
+
+    @context_s.setter
+    def context_s(self, value: float) -> None:
+        self._context_s = check_context(value, self.window_s)
+
+    @property
+    def lookback_s(self) -> float:
+        """How far back a label looks for windows to fuse (s): ``context_s − window_s``."""
+        return max(self.context_s - self.window_s, 0.0)
+
+    def fuse(self, proba, recording, start_s) -> np.ndarray:
+        """:func:`fuse_context` with this model's look-back."""
+        return fuse_context(proba, recording, start_s, lookback_s=self.lookback_s)
+
+    @property
+    def needs_speed(self) -> bool:
+        """Whether windows must come with the robot speed."""
+        return self.spec.kind == "fitted" and self.spec.use_speed
+
+    def _speeds(self, n: int, speeds) -> np.ndarray:
+        if speeds is None:
+            if self.needs_speed:
+                raise ValueError("this model needs the robot speed (m/s) of each window")
+            return np.full(n, np.nan)
+        speeds = np.broadcast_to(np.asarray(speeds, dtype=float), (n,))
+        if self.needs_speed:
+            check_speed(speeds)
+        return speeds
+
+    def predict_proba(self, windows, speeds=None) -> np.ndarray:
+        """Class probabilities, shape ``(n, classes)``, for windows ``(n, window)``."""
+        windows = np.asarray(windows, dtype=float)
+        if windows.shape[1:] != self.spec.window_shape:
+            shape = ", ".join(map(str, ("n", *self.spec.window_shape)))
+            raise ValueError(f"windows must have shape ({shape}), got {windows.shape}")
+        speeds = self._speeds(len(windows), speeds)
+        n = len(windows)
+        if n == 0:
+            return np.zeros((0, len(self.labels)), np.float32)
+        # Padded (repeating the last window) to a size class: one compilation serves
+        # recordings and datasets of many lengths.
+        rows = np.minimum(np.arange(pad_rows(n)), n - 1)
+        p = _batch_proba(self._structure, *self._args, windows[rows], speeds[rows])
+        return np.asarray(p)[:n]
+
+    def predict_windows(self, windows, speeds=None) -> tuple[np.ndarray, np.ndarray]:
+        """Class index and confidence (its probability) per window."""
+        p = self.predict_proba(windows, speeds)
+        idx = np.argmax(p, axis=1)
+        return idx, p[np.arange(len(idx)), idx]
+
+    def predict_window(self, samples, speed: float | None = None) -> tuple[str, float]:
+        """Label and confidence of one window of ``window`` samples at ``rate_hz``, on its
+        own (no context; the online stream fuses :meth:`window_proba` itself).
+
+        This is the stable entry point for online use: compiled on the first call for the
+        model's architecture, one small dispatch per call afterwards.
+        """
+        p = self.window_proba(samples, speed)
+        k = int(np.argmax(p))
+        return self.labels[k], float(p[k])
+
+    def window_proba(self, samples, speed: float | None = None) -> np.ndarray:
+        """Class probabilities of one window, shape ``(classes,)`` (see :meth:`predict_window`)."""
+        x = np.asarray(samples, dtype=np.float64)
+        if x.shape != self.spec.window_shape:
+            raise ValueError(
+                f"a window has {self.window} samples (shape {self.spec.window_shape}), "
+                f"got shape {x.shape}"
+            )
+        if speed is None and self.needs_speed:
+            raise ValueError("this model needs the robot speed (m/s) of each window")
+        if self.needs_speed:
+            check_speed(speed)
+        v = np.float64(np.nan if speed is None else speed)
+        return np.asarray(_window_proba(self._structure, *self._args, x, v))
+
+    def classify_recording(self, rec: Recording, *, speed: float | None = None) -> dict:
+        """Labels of every window of a recording, and one for the whole (mean probability).
+
+        Each window's ``label`` and ``confidence`` fuse its context (``context_s``);
+        ``window_label`` and ``window_confidence`` are the window's own. ``channel`` is the
+        column classified: the model's, or a recording's only signal column whatever its
+        name (an NPY recording's is ``signal``).
+        """
+        if self.spec.channels != 1:
+            raise ValueError("classify_recording reads one channel; this model takes several")
+        if self.channel is not None and self.channel not in rec.columns and len(rec.columns) > 1:
+            raise RecordingError(
+                f"{rec.source or 'recording'}: no column {self.channel!r}, the one the model "
+                f"was trained on (columns: {list(rec.columns)}): rename the column, or "
+                "train a model on one of these"
+            )
+        used = signal_column(rec, self.channel, only_column_ok=True)
+        x = recording_signal(rec, used)
+        check_rate(rec, self.rate_hz)
+        w, starts = windows_of(rec.t, x, rate_hz=self.rate_hz, window=self.window, hop=self.hop)
+        if len(w) == 0:
+            raise RecordingError(
+                f"{rec.source}: shorter than one window ({self.window / self.rate_hz:g} s)"
+            )
+        if speed is None and self.needs_speed:
+            speed = recording_speed(rec)
+            if not np.isfinite(speed):
+                raise RecordingError(
+                    f"{rec.source}: the model needs the robot speed; add '# speed_mps: V' "
+                    "to the recording or pass --speed"
+                )
+        p = self.predict_proba(w, None if speed is None else np.full(len(w), speed))
+        fused = self.fuse(p, np.zeros(len(w), int), starts)
+        own, idx = np.argmax(p, axis=1), np.argmax(fused, axis=1)
+        mean = p.mean(axis=0)
+        return {
+            "label": self.labels[int(np.argmax(mean))],
+            "confidence": float(mean.max()),
+            "channel": used,
+            "context_s": self.context_s,
+            "windows": [
+                {"start_s": round(float(starts[i]), 6), "label": self.labels[k],
+                 "confidence": round(float(fused[i, k]), 4),
+                 "window_label": self.labels[own[i]],
+                 "window_confidence": round(float(p[i, own[i]]), 4)}
+                for i, k in enumerate(idx)
+            ],
+        }  # fmt: skip
+
+    # ----------------------------------------------------------------------- files
+    def header(self) -> dict:
+        """The JSON header of a model file."""
+        return {
+            "format": MODEL_FORMAT,
+            "whiskerid_version": __version__,
+            "features": self.spec.to_dict(),
+            "rate_hz": self.rate_hz,
+            "window": self.window,
+            "window_s": self.window / self.rate_hz,
+            "hop": self.hop,
+            "context_s": self.context_s,
+            "context": "a label fuses the windows that started up to context_s - window_s "
+                       "before it (mean log-probability, renormalised)",
+            "channel": self.channel,
+            "labels": list(self.labels),
+            "normalisation": {"mean": self.mean.tolist(), "std": self.std.tolist()},
+            "network": {"sizes": self.net.sizes, "hidden_activation": "relu",
+                        "output": "softmax", "members": len(self.nets),
+                        "combine": "mean of the members' probabilities"},
+            "training": self.info,
+        }  # fmt: skip
+
+    def save(self, path: str | Path) -> Path:
+        """Write ``path/model.json`` and ``path/weights.npz``."""
+        path = Path(path)
+        if path.exists() and not path.is_dir():
+            raise ValueError(f"{path} is a file; a model is a folder: give a folder name")
+        path.mkdir(parents=True, exist_ok=True)
+        arrays = {f"m{j}_{k}": a for j, n in enumerate(self.nets) for k, a in to_arrays(n).items()}
+        np.savez(path / MODEL_WEIGHTS, **arrays)
+        (path / MODEL_JSON).write_text(json.dumps(self.header(), indent=2) + "\n")
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> "ClassifierModel":
+        """Read a model folder; refuses corrupt or incompatible files with a clear message."""
+        path = Path(path)
+        head_file = path / MODEL_JSON if path.is_dir() else path
+        if not head_file.is_file():
+            raise ModelError(
+                f"{path}: no classifier model here (expected a folder with {MODEL_JSON})"
+            )
+        try:
+            head = json.loads(head_file.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as err:
+            raise ModelError(f"{head_file}: corrupt model header (not JSON: {err})") from None
+        if not isinstance(head, dict) or head.get("format") != MODEL_FORMAT:
+            got = head.get("format") if isinstance(head, dict) else None
+            raise ModelError(
+                f"{head_file}: incompatible model format {got!r}; this whiskerid "
+                f"({__version__}) reads {MODEL_FORMAT!r}: retrain with 'whiskerid train'"
+            )
+        try:
+            spec = FeatureSpec.from_dict(head["features"])
+            labels = [str(s) for s in head["labels"]]
+            mean = np.asarray(head["normalisation"]["mean"], dtype=float)
+            std = np.asarray(head["normalisation"]["std"], dtype=float)
+            sizes = [int(s) for s in head["network"]["sizes"]]
+            hop = int(head["hop"])
+            if hop < 1:
+                raise ValueError(f"hop {hop} < 1")
+            if len(set(labels)) != len(labels):
+                raise ValueError(f"repeated labels {labels}")
+            context_s = float(head.get("context_s", spec.window / spec.rate_hz))
+            if not np.isfinite(context_s):
+                raise ValueError(f"context_s {context_s}")
+            members = int(head["network"].get("members", 1))
+            if members < 1:
+                raise ValueError(f"members {members} < 1")
+        except (KeyError, TypeError, ValueError) as err:
+            raise ModelError(f"{head_file}: corrupt model header ({err!r})") from None
+        n = spec.n_features
+        if sizes[0] != n or sizes[-1] != len(labels) or mean.shape != (n,) or std.shape != (n,):
+            raise ModelError(
+                f"{head_file}: inconsistent model (features {n}, network {sizes}, "
+                f"{len(labels)} labels, normalisation {mean.shape})"
+            )
+        if not (np.isfinite(mean).all() and np.isfinite(std).all() and (std > 0).all()):
+            raise ModelError(f"{head_file}: corrupt normalisation (non-finite or zero std)")
+        weights = head_file.parent / MODEL_WEIGHTS
+        try:
+            with np.load(weights, allow_pickle=False) as z:
+                arrays = {k: z[k] for k in z.files}
+            nets = []
+            for j in range(members):
+                prefix = f"m{j}_"
+                mine = {k[len(prefix) :]: a for k, a in arrays.items() if k.startswith(prefix)}
+                nets.append(from_arrays(mine, sizes))
+        except FileNotFoundError:
+            raise ModelError(f"{weights}: missing model weights") from None
+        except (ValueError, OSError, EOFError, zipfile.BadZipFile) as err:
+            raise ModelError(f"{weights}: corrupt model weights ({err})") from None
+        try:
+            return cls(spec, labels, mean, std, nets, hop=hop, channel=head.get("channel"),
+                       info=head.get("training", {}), context_s=context_s)  # fmt: skip
+        except ValueError as err:
+            raise ModelError(f"{head_file}: corrupt model header ({err})") from None

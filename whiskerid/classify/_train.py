@@ -1,0 +1,145 @@
+"""Training a classifier: feature settings for a window set, standardisation, the MLP with
+early stopping on held-out *recordings* (then refitted on all windows), and the model."""
+
+from dataclasses import replace
+
+import numpy as np
+
+from ._context import check_context, default_context_s
+from ._dataset import WindowSet
+from ._features import FeatureSpec, compute_features
+from ._mlp import TrainConfig, default_config, train_mlp
+from ._model_file import ClassifierModel
+from ._split import grouped_split
+
+
+def default_spec(
+    ws: WindowSet, features: str = "fitted", *, use_speed: bool | None = None
+) -> FeatureSpec:
+    """Feature settings for a window set: its rate and window; speed features and absolute
+    octave levels when the speed is known.
+
+    The spatial-frequency range is the one every training speed covers: bins from
+    ``2 Δf`` at the slowest speed to Nyquist at the fastest.
+    """
+    window = ws.windows.shape[-1]
+    channels = ws.windows.shape[1] if ws.windows.ndim == 3 else 1
+    if features == "paper":
+        return FeatureSpec(kind="paper", rate_hz=ws.rate_hz, window=window, channels=channels)
+    use = ws.has_speed if use_speed is None else use_speed
+    if use and not ws.has_speed:
+        raise ValueError("speed features need speed_mps on every recording")
+    # Absolute octave levels only with the speed: without it a level says as much about
+    # how fast a run went as about the ground (BorealTC, runs held out: 1-4 points worse
+    # with them; the synthetic set, where the speed is known: 1 point better).
+    spec = FeatureSpec(kind="fitted", rate_hz=ws.rate_hz, window=window, octave_bands=use,
+                       use_speed=use, channels=channels)  # fmt: skip
+    if use:
+        df, nyq = ws.rate_hz / window, ws.rate_hz / 2
+        lo, hi = 2 * df / float(ws.speeds.min()), nyq / float(ws.speeds.max())
+        if not lo < hi / 2:
+            lo = hi / 10
+        spec = replace(spec, spatial_lo=float(lo), spatial_hi=float(hi))
+    return spec
+
+
+def features_of(ws: WindowSet, spec: FeatureSpec) -> np.ndarray:
+    """Features of every window, shape ``(n, spec.n_features)``."""
+    speeds = ws.speeds if (spec.kind == "fitted" and spec.use_speed) else None
+    return np.asarray(compute_features(spec, ws.windows, speeds))
+
+
+def fit_on_features(
+    feats: np.ndarray, ws: WindowSet, spec: FeatureSpec, config: TrainConfig,
+    *, val_fraction: float = 0.2, context_s: float | None = None,
+) -> ClassifierModel:  # fmt: skip
+    """Train on precomputed features of ``ws`` (validation: held-out recordings).
+
+    Early stopping on held-out recordings chooses the number of epochs; with
+    ``config.refit`` (default) the network is then trained again on all of ``ws`` for that
+    many epochs. With ``config.ensemble = K > 1``, K networks are trained, each with its
+    own seed and its own validation recordings, and their probabilities are averaged.
+    ``context_s`` goes into the model (see :class:`ClassifierModel`); None: each window on
+    its own (:func:`train_classifier` applies :func:`default_context_s`).
+    """
+    if context_s is not None:  # refused before training, not after
+        check_context(context_s, spec.window / spec.rate_hz)
+    mean = feats.mean(axis=0)
+    std = np.maximum(feats.std(axis=0), 1e-6 * (np.abs(mean) + 1.0))
+    z = (feats - mean) / std
+    nets, runs, refit_epochs = [], [], 0
+    for j in range(max(config.ensemble, 1)):
+        cfg = replace(config, seed=config.seed + 1000 * j)
+        val = grouped_split(ws, val_fraction, cfg.seed + 1)
+        n_cls = len(ws.label_names)
+        res = train_mlp(z[~val], ws.labels[~val], z[val], ws.labels[val], n_cls, cfg)
+        runs.append(res)
+        if cfg.refit:  # same padded shape: no new compilation
+            res = train_mlp(z, ws.labels, z[:0], ws.labels[:0], n_cls, cfg, epochs=res.best_epoch)
+            refit_epochs += res.epochs
+        nets.append(res.model)
+    info = {"epochs": sum(r.epochs for r in runs), "best_epoch": runs[0].best_epoch,
+            "refit_on_all": config.refit, "refit_epochs": refit_epochs,
+            "val_loss": round(float(np.mean([r.best_val_loss for r in runs])), 5),
+            "val_accuracy": round(float(np.mean([r.val_accuracy for r in runs])), 4),
+            "members": len(nets), "train_windows": len(ws) if config.refit else int((~val).sum()),
+            "val_windows": int(val.sum()),
+            "seed": config.seed, "hidden": list(config.hidden),
+            "weight_decay": config.weight_decay, "input_noise": config.input_noise}  # fmt: skip
+    return ClassifierModel(spec, ws.label_names, mean, std, nets, hop=ws.windows.shape[-1],
+                           info=info, context_s=context_s)  # fmt: skip
+
+
+def check_classes(ws: WindowSet) -> None:
+    """Refuse training data with fewer than two classes or a class without windows (its
+    recordings all shorter than one window): a model would learn nothing of it, yet name
+    it as a class."""
+    counts = np.bincount(ws.labels, minlength=len(ws.label_names))
+    if len(ws.label_names) < 2:
+        raise ValueError(
+            f"a classifier needs at least two terrains; the data have only {list(ws.label_names)}"
+        )
+    empty = [lab for lab, c in zip(ws.label_names, counts, strict=True) if c == 0]
+    if empty:
+        window_s = ws.windows.shape[-1] / ws.rate_hz
+        raise ValueError(
+            f"no windows of {empty}: their recordings are shorter than one window "
+            f"({window_s:g} s); record longer or pass a shorter window"
+        )
+
+
+def train_classifier(
+    ws: WindowSet,
+    *,
+    features: str = "fitted",
+    config: TrainConfig | None = None,
+    use_speed: bool | None = None,
+    channel: str | None = None,
+    hop: int | None = None,
+    context_s: float | None = None,
+) -> ClassifierModel:
+    """Train a classifier on labelled windows.
+
+    Args:
+        ws: Training windows (all of them; a validation part of whole recordings is held
+            out inside for early stopping).
+        features: ``fitted`` (ours) or ``paper`` (standardise + |FFT|, the paper's network).
+        config: Network and training settings; the paper's preset sizes for ``paper``.
+        use_speed: Speed-normalised features; by default when every recording has a speed.
+        channel: Recorded column the model classifies (kept in the model file); the
+            window set's own by default.
+        hop: Window step for whole recordings (samples); the window length by default.
+        context_s: Signal each label rests on (s), fused over consecutive windows
+            (:func:`fuse_context`); :func:`default_context_s` by default.
+    """
+    if config is None:
+        config = default_config(features)
+    check_classes(ws)
+    spec = default_spec(ws, features, use_speed=use_speed)
+    if context_s is None:
+        context_s = default_context_s(features, spec.window / spec.rate_hz)
+    model = fit_on_features(features_of(ws, spec), ws, spec, config, context_s=context_s)
+    model.channel = ws.channel if channel is None else channel
+    if hop is not None:
+        model.hop = int(hop)
+    return model
