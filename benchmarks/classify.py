@@ -20,7 +20,7 @@ from whiskerid.classify import (
     features_of,
     fit_on_features,
 )
-from whiskerid.terrain._terrain import RunSpec
+from whiskerid.terrain import RunSpec
 
 
 def main() -> None:

@@ -43,7 +43,7 @@ def add_parser(sub) -> None:
 
 def run(args) -> dict:
     """Synthesise the recordings; returns the JSON summary."""
-    from ..terrain._terrain import synthesize_dataset
+    from ..terrain import synthesize_dataset
 
     if args.runs < 1 or args.duration <= 0:
         raise CommandError("--runs must be >= 1 and --duration > 0")

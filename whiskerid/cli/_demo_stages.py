@@ -228,7 +228,7 @@ def _classification_stage(out: Path, *, plots: bool, say) -> dict:
     from ..classify import evaluate_classifier as evaluate
     from ..classify import format_confusion, load_dataset, split_by_recording, train_classifier
     from ..plot import plot_confusion
-    from ..terrain._terrain import synthesize_dataset
+    from ..terrain import synthesize_dataset
 
     say("[6] terrain classification: 7 simulated terrains at 0.2 m/s, 16 runs x 6 s each")
     # Many short runs rather than a few long ones: what the network needs to see is the

@@ -108,7 +108,7 @@ def run(args) -> dict:
     print(f"stream: {out['samples']} samples, {out['windows']} windows, majority "
           f"{out['majority_label']}, gaps {out['gaps']}, overruns {out['overruns']}, "
           f"windows skipped {out['skipped_windows']} / dropped {out['dropped_windows']}"
-          + (f", {out['fraction_correct']:.1%} windows right" if args.simulate else "")
+          + _right(out, args.simulate)
           + (f", recorded to {out['record']}" if out["record"] else ""),
           file=sys.stderr)  # fmt: skip
     return out
@@ -132,3 +132,12 @@ def _check_numbers(args) -> None:
             f"--duration {args.duration:g} s: a simulated stream lasts at most "
             f"{MAX_SIMULATED_S:g} s (its terrain is synthesised up front)"
         )
+
+
+def _right(out: dict, truth: str | None) -> str:
+    """The share of windows labelled right, when the truth is known and a window was labelled."""
+    if truth is None:
+        return ""
+    if out["fraction_correct"] is None:
+        return ", no window labelled"
+    return f", {out['fraction_correct']:.1%} windows right"
