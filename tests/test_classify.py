@@ -128,6 +128,20 @@ def test_recording_folds_deal_whole_recordings_stratified():
             recording_folds(ws, bad)
 
 
+def test_cross_validation_scores_every_recording_once_and_compiles_once():
+    """Folds share compiled functions, and so do other numeric training settings."""
+    ws, cfg = _toy_windows(n_rec=8), replace(FAST, max_epochs=100)
+    cv = wi.cross_validate(ws, folds=4, config=cfg)
+    assert cv["accuracy"] > 0.9 and cv["context_s"] == 3.0 and cv["n_windows"] == 80
+    assert cv["n_recordings"] == 8 and cv["accuracy_per_recording"] >= 7 / 8
+    assert len(cv["per_recording"]) == 8 and len(cv["accuracy_by_fold"]) == 4
+    with _Compiles() as compiled:  # other folds, step size and regularisation
+        other = replace(cfg, learning_rate=1e-2, weight_decay=0.1, input_noise=0.1, seed=5)
+        wi.cross_validate(ws, folds=4, seed=3, config=other)
+    assert not {"_run_chunk", "_predict_proba", "_batch_features"} & set(compiled), compiled
+
+
+@pytest.mark.slow
 def test_cross_validation_tests_recordings_a_model_never_saw():
     """Each recording has its own tone (15 + 5 r Hz) and the labels alternate, so a
     network can learn every recording's tone but a new recording's neighbours in frequency
@@ -425,8 +439,7 @@ class _Compiles(logging.Handler):
 
 def test_one_compilation_per_architecture(tmp_path):
     """Models of one architecture share compiled functions: loading a model file twice, or
-    a second model with other weights, compiles nothing more; nor do cross-validation folds
-    of other sizes or other numeric training settings."""
+    a second model with other weights, compiles nothing more."""
     ws = _toy_windows(n_rec=6, per=8)
     cfg = replace(FAST, max_epochs=20)  # compiled for other tests too
     for seed in (0, 1):
@@ -438,8 +451,3 @@ def test_one_compilation_per_architecture(tmp_path):
                 model.predict_proba(ws.windows[:n])
             model.predict_window(ws.windows[0])
     assert compiled["_batch_proba"] <= 1 and compiled["_window_proba"] <= 1, compiled
-    wi.cross_validate(ws, folds=3, config=cfg)
-    with _Compiles() as compiled:  # other folds, step size and regularisation
-        other = replace(cfg, learning_rate=1e-2, weight_decay=0.1, input_noise=0.1, seed=5)
-        wi.cross_validate(ws, folds=3, seed=3, config=other)
-    assert not {"_run_chunk", "_predict_proba", "_batch_features"} & set(compiled), compiled
