@@ -21,7 +21,7 @@ from whiskerid.classify import (
     recording_folds,
 )
 from whiskerid.classify._mlp import train_mlp
-from whiskerid.cli._main import main
+from whiskerid.cli import main
 
 FAST = TrainConfig(hidden=(32, 16), max_epochs=60, patience=20, batch_size=64)
 

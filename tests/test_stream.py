@@ -15,7 +15,7 @@ from whiskerid.hw import BackgroundClassifier, OnlineClassifier, run_stream
 
 import whiskerid as wi
 from whiskerid import hw
-from whiskerid.cli._main import main
+from whiskerid.cli import main
 from whiskerid.io import TornRecordingWarning
 
 
