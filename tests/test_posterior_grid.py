@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import whiskerid as wi
-from whiskerid.fit import _calibrate as cal
+from whiskerid.fit import RecordingModel
 from whiskerid.posterior import _posterior as P
 
 F1, ZETA, NOISE, N = 48.0, 0.02, 0.05, 500
@@ -32,6 +32,17 @@ def decay(seed=0, n=N, jitter=2e-4, drop=None, wander=0.0):
     return wi.Observation(t[keep], y[keep], name=f"decay-{seed}")
 
 
+def _recording(t, modes, offsets=None):
+    """A free decay's recording model at times ``t`` (data zero), as the fit builds it."""
+    t = jnp.asarray(t)
+    return RecordingModel(
+        t=t, y=jnp.zeros_like(t), weight=jnp.asarray(1.0), scale=jnp.asarray(1.0),
+        hb_m=jnp.asarray(1e-3), x_m=jnp.asarray(0.005), fb_hz=jnp.asarray(0.0),
+        avg_offsets=None if offsets is None else jnp.asarray(offsets), base_acc=None,
+        excitation="decay", observable="deflection", forced="none", n_cols=2 + 2 * modes,
+    )  # fmt: skip
+
+
 def _direct(prob, z):
     return np.asarray(jax.vmap(lambda v: P.log_prob_one(prob.model, v, prob.args))(z))
 
@@ -47,7 +58,6 @@ def _grid_ok(prob, z):
 def test_grid_columns_equal_direct_columns(modes, offsets, n):
     """Gridded columns (padding included) vs ``_columns`` on jittered, non-uniform times."""
     w = wi.paper_record().whisker().with_modes(modes)
-    spec = cal._Spec("decay", "deflection", "none", 2 + 2 * modes, 0.005, 0.0, offsets)
     rng = np.random.default_rng(3)
     t = 0.02 + np.arange(n) / 1000.0 + rng.uniform(-1e-4, 1e-4, n)
     y = rng.standard_normal(n)
@@ -56,8 +66,9 @@ def test_grid_columns_equal_direct_columns(modes, offsets, n):
     omega = np.asarray(w.omega_rad_s)
     degrees = tuple(P._taylor_degree(o * grid["dmax"]) for o in omega)
     gj = {k: jnp.asarray(v) for k, v in grid.items()}
-    cols = P._grid_columns(P._decay_tables(None, spec, w, gj), gj, degrees)
-    direct, _ = P._columns(None, spec, w, {}, {"t": t, "y": y})
+    rec = _recording(t, modes, offsets)
+    cols = P._grid_columns(P._decay_tables(rec, w, gj), gj, degrees)
+    direct, _ = P._columns(rec, w, {})
     mask = grid["mask"].ravel()
     assert mask.sum() == n and np.all(mask[n:] == 0)
     for c_grid, c_direct in zip(cols, direct, strict=True):
@@ -66,7 +77,7 @@ def test_grid_columns_equal_direct_columns(modes, offsets, n):
         assert np.all(flat[n:] == 0)  # padding contributes nothing to any sum
     # The sampled coefficients folded into the tables: Σ c_cos C + c_sin S in one column.
     c = rng.standard_normal((2, modes))
-    tables = P._decay_tables(None, spec, w, gj, (jnp.asarray(c[0]), jnp.asarray(-c[1])))
+    tables = P._decay_tables(rec, w, gj, (jnp.asarray(c[0]), jnp.asarray(-c[1])))
     total = np.asarray(P._grid_columns(tables, gj, degrees, summed=True)[2]).ravel()[:n]
     expected = sum(c[0, i] * direct[2 + i] + c[1, i] * direct[2 + modes + i] for i in range(modes))
     np.testing.assert_allclose(total, expected, rtol=0, atol=1e-13)
@@ -107,7 +118,7 @@ def test_batch_falls_back_to_direct_columns():
     prob = P.setup_posterior(wi.paper_record(), decay(0), n_modes=1, marginalize=False)
     m = prob.model
     (degree,) = m.grid_degrees[0]
-    dmax = float(prob.args["recs"][0]["grid"]["dmax"])
+    dmax = float(prob.args["grids"][0]["dmax"])
     f1 = float(prob.record.whisker().natural_frequencies_hz[0])
     z = np.tile(prob.z0, (16, 1))
     # f_1 ∝ √κ: one walker at four times the f_1 the Taylor radius allows (still inside the
@@ -136,7 +147,7 @@ def test_no_grid_for_irregular_timestamps():
     assert one.model.grid_degrees[0] is not None  # one mode: still within the cap
     three = P.setup_posterior(wi.paper_record(), obs, n_modes=3, marginalize=False)
     assert three.model.grid_degrees == (None,)
-    assert "grid" not in three.args["recs"][0]
+    assert three.args["grids"][0] is None
     z = three.z0 + 1e-4 * np.random.default_rng(2).standard_normal((4, three.z0.size))
     np.testing.assert_allclose(three.log_prob(z), _direct(three, z), rtol=1e-14, atol=0)
 

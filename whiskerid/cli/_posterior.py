@@ -6,10 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..fit._calibrate import PINS, read_static_test
+from .._choices import LIKELIHOODS, MOVES, PINS
 from ..io._recording import same_file
-from ..model._record import load_record
-from ..posterior._posterior import LIKELIHOODS, MOVES, sample_posterior
 from ._calibrate import add_data_options, check_data_options, load_observation
 
 
@@ -67,6 +65,10 @@ def _cmd_posterior(args, command_error) -> dict:
         raise command_error(f"--nu {args.nu!r} must be a positive number")
     check_data_options(args)
     _check_inputs_survive(args, command_error)
+    from ..fit import read_static_test
+    from ..model import load_record
+    from ..posterior import sample_posterior
+
     record = load_record(args.fit)
     obs = [load_observation(p, record, args) for p in args.recordings]
     static = read_static_test(args.static) if args.static else None

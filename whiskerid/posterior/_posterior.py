@@ -53,12 +53,24 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.flatten_util import ravel_pytree
 
 from .._choices import LIKELIHOODS, MOVES
-from ..fit import _calibrate as _cal
-from ..fit import _lsq as _lsq
-from ..fit._calibrate import ZETA_MAX, Observation, sha256_of
-from ..model._modes import cantilever_roots
+from ..fit import (
+    ZETA_MAX,
+    FitProblem,
+    Observation,
+    calibrate,
+    cho_solve_small,
+    cholesky_small,
+    conversion_average,
+    decay_rates,
+    free_decay_columns,
+    recording_design,
+    reported_names,
+    sha256_of,
+    to_interval,
+)
 from ..model._record import WhiskerRecord
 from ..model._trig import sincos
 
@@ -157,10 +169,9 @@ def default_prior(f1_hz: float) -> dict[str, tuple[str, float, float]]:
 # --------------------------------------------------------------------------- model
 @dataclass(frozen=True)
 class _Model:
-    """Static description of the log-probability (hashable: the jit key)."""
+    """Static description of the log-probability (hashable: the jit key). The fit problem,
+    whose numbers are traced, travels in the arguments (``args["problem"]``)."""
 
-    problem: Any
-    unravel: Any
     n_theta: int
     n_rec: int
     likelihood: str
@@ -175,57 +186,40 @@ class _Model:
         return self.n_theta + self.n_rec
 
 
-def _omega(problem, w):
-    """``w.omega_rad_s``, with the eigenvalues as constants when μ is fixed.
-
-    Inside the jitted log-probability μ = M_t/(ρa l) is a traced value even when it is a
-    constant of the problem, and the root finder's loop would run in every call. Unless a
-    static test frees ρa (``fit_ei``), μ is computed here from the problem's numbers, so
-    :func:`whiskerid.cantilever_roots` returns its cached roots (equal to the traced ones to
-    rounding; tests/test_modes.py).
-    """
-    if problem is None or problem.fit_ei:
-        return w.omega_rad_s
-    mu = problem.tip_mass_kg / (problem.rho_a * problem.length_m)
-    beta = cantilever_roots(mu, w.n_modes)
-    return beta**2 * jnp.sqrt(w.kappa) / w.length_m**2
+def _sampled_params(problem: FitProblem, marginal: bool):
+    """The parameter pytree of the sampled space (zeros): the fit's, without the linear
+    coefficients ``c`` when they are marginalised."""
+    theta = problem.zero_params()
+    return _drop_c(theta) if marginal else theta
 
 
-def _columns(problem, spec, w, rec, d):
+def _unravel(problem: FitProblem, marginal: bool):
+    """Flat sampled vector → parameter pytree (the layout follows from the structure)."""
+    return ravel_pytree(_sampled_params(problem, marginal))[1]
+
+
+def _columns(rec, w, rec_params):
     """The calibration's design of one recording as a list of columns, and its fixed part.
 
-    Equal (to rounding) to ``_calibrate._design``'s ``(D, g)``, with ``D`` split into its
-    columns: the likelihood below then forms ``Dᵀ D``, ``Dᵀ y`` and ``D c`` from elementwise
-    products and sums, which XLA fuses into a few loops (a batched ``dot`` over 16 walkers ×
-    500 × 4 and the concatenation cost more than the arithmetic). Free decays, the common
-    case, are built here with the fast free-decay columns (a test checks them against
-    ``_calibrate._design``); sines and base motion come from ``_calibrate._design``.
+    Equal (to rounding) to :func:`whiskerid.fit.recording_design`'s ``(D, g)``, with ``D``
+    split into its columns: the likelihood below then forms ``Dᵀ D``, ``Dᵀ y`` and ``D c``
+    from elementwise products and sums, which XLA fuses into a few loops (a batched ``dot``
+    over 16 walkers × 500 × 4 and the concatenation cost more than the arithmetic). Free
+    decays, the common case, are built here, one mode at a time, with the shared
+    :func:`whiskerid.fit.free_decay_columns` and the fast ``sincos``; sines and base motion
+    come from :func:`whiskerid.fit.recording_design`.
     """
-    if spec.excitation != "decay":
-        D, g = _cal._design(problem, spec, w, rec, d)
+    if rec.excitation != "decay":
+        D, g = recording_design(rec, w, rec_params)
         return [D[:, i] for i in range(D.shape[1])], g
-    t = d["t"]
+    t = rec.t
     span = jnp.maximum(t[-1] - t[0], 1e-12)
-    omega, zeta = _omega(problem, w), w.zeta
-    wd = omega * jnp.sqrt(1.0 - zeta**2)
+    sigma, wd = decay_rates(w.omega_rad_s, w.zeta)
     cos_cols, sin_cols = [], []
     for i in range(w.n_modes):  # e^{-ζω t} cos(ω_d t) and e^{-ζω t} sin(ω_d t)
-        e = jnp.exp(-zeta[i] * omega[i] * t)
-        s, c = sincos(wd[i] * t)
-        cos_cols.append(e * c)
-        sin_cols.append(e * s)
-    if spec.avg_offsets is not None:
-        # ADC conversion average in closed form, as _calibrate._free_columns_averaged:
-        # the mean of e^{λ(t + o_k)} over the offsets is e^{λt} · mean_k e^{λ o_k}.
-        off = jnp.asarray(spec.avg_offsets)[:, None]
-        e = jnp.exp(-zeta * omega * off)
-        a_re = jnp.mean(e * jnp.cos(wd * off), axis=0)
-        a_im = jnp.mean(e * jnp.sin(wd * off), axis=0)
-        m = range(w.n_modes)
-        cos_cols, sin_cols = (
-            [cos_cols[i] * a_re[i] - sin_cols[i] * a_im[i] for i in m],
-            [sin_cols[i] * a_re[i] + cos_cols[i] * a_im[i] for i in m],
-        )
+        c, s = free_decay_columns(t, sigma[i], wd[i], rec.avg_offsets, sincos=sincos)
+        cos_cols.append(c)
+        sin_cols.append(s)
     cols = [jnp.ones_like(t), (t - 0.5 * (t[0] + t[-1])) / span, *cos_cols, *sin_cols]
     return cols, jnp.zeros_like(t)
 
@@ -312,23 +306,20 @@ def _decay_grid(t: np.ndarray, y: np.ndarray) -> dict:
     }
 
 
-def _decay_tables(problem, spec, w, grid, weight=None):
+def _decay_tables(rec, w, grid, weight=None):
     """The short tables of :func:`_grid_columns`: real and imaginary parts ``(modes, J + K)``
     of ``e^{λ T_j}`` times the ADC average's constant factor (see :func:`_columns`) and
     ``weight`` (complex per mode, or None), then ``e^{λ τ_k}`` (one array each, so XLA
     computes them in few loops); then ``Re λ`` and ``Im λ`` per mode."""
-    omega, zeta = _omega(problem, w), w.zeta
-    lam_re, lam_im = -zeta * omega, omega * jnp.sqrt(1.0 - zeta**2)
+    sigma, lam_im = decay_rates(w.omega_rad_s, w.zeta)
+    lam_re = -sigma
     x = grid["x"]
     e = jnp.exp(lam_re[:, None] * x)
     s, c = sincos(lam_im[:, None] * x)
     t_re, t_im = e * c, e * s
     f_re, f_im = jnp.ones_like(lam_re), jnp.zeros_like(lam_re)
-    if spec.avg_offsets is not None:
-        off = jnp.asarray(spec.avg_offsets)[:, None]
-        e = jnp.exp(lam_re * off)
-        f_re = jnp.mean(e * jnp.cos(lam_im * off), axis=0)
-        f_im = jnp.mean(e * jnp.sin(lam_im * off), axis=0)
+    if rec.avg_offsets is not None:
+        f_re, f_im = conversion_average(sigma, lam_im, rec.avg_offsets)
     if weight is not None:
         f_re, f_im = f_re * weight[0] - f_im * weight[1], f_re * weight[1] + f_im * weight[0]
     # The factor multiplies the T part only (the first J entries).
@@ -409,28 +400,27 @@ def _sum_all_jvp(primals, tangents):
     return _sum_all(arrays), tuple(jnp.sum(t) for t in dots)
 
 
-def _rec_loglik(model, spec, rec, d, w, log_sigma, nu, degrees=None, tables=None):
+def _rec_loglik(model, rec, rec_params, grid, w, log_sigma, nu, degrees=None, tables=None):
     """One recording's log-likelihood; with ``degrees`` and ``tables`` on its gridded
     columns (exact zeros in the padding, so every sum below is over the recorded samples)."""
     known, logdet = 0, 0.0
     if degrees is not None:
         # Sampled coefficients: the free-decay ones are folded into the tables.
         summed = not model.marginal
-        cols = _grid_columns(tables, d["grid"], degrees, summed=summed)
-        y = d["grid"]["y"]
-        c = [rec["c"][0], rec["c"][1], 1.0] if summed else None
+        cols = _grid_columns(tables, grid, degrees, summed=summed)
+        y = grid["y"]
+        c = [rec_params["c"][0], rec_params["c"][1], 1.0] if summed else None
         if model.marginal:
             # The offset and drift columns F replaced by their orthonormal basis q (same
             # span, so the same fit; log|DᵀD| changes by the constant log det FᵀF): their
             # Gram entries and qᵀy are then known, not summed again on every call.
-            grid = d["grid"]
             cols = [grid["q"][0], grid["q"][1], *cols[2:]]
             known, logdet = 2, grid["logdet_f"]
     else:
-        cols, g = _columns(model.problem, spec, w, rec, d)
-        y = d["y"] - g
-        c = None if model.marginal else rec["c"]
-    n, k = d["y"].shape[0], len(cols)
+        cols, g = _columns(rec, w, rec_params)
+        y = rec.y - g
+        c = None if model.marginal else rec_params["c"]
+    n, k = rec.y.shape[0], len(cols)
     sigma = jnp.exp(log_sigma)
     if model.marginal:
         # Normal equations with Jacobi scaling, solved element by element (k is small; see
@@ -444,14 +434,9 @@ def _rec_loglik(model, spec, rec, d, w, log_sigma, nu, degrees=None, tables=None
         for (i, j), v in zip(pairs, sums, strict=False):
             gram[i][j] = v
         s = [1.0 if i < known else jnp.sqrt(gram[i][i]) for i in range(k)]
-        L = _lsq.cholesky_small(
-            [[gram[i][j] / (s[i] * s[j]) for j in range(i + 1)] for i in range(k)]
-        )
-        b = [
-            d["grid"]["qty"][i] if i < known else sums[len(pairs) + i - known] / s[i]
-            for i in range(k)
-        ]
-        coef = _lsq.cho_solve_small(L, b)
+        L = cholesky_small([[gram[i][j] / (s[i] * s[j]) for j in range(i + 1)] for i in range(k)])
+        b = [grid["qty"][i] if i < known else sums[len(pairs) + i - known] / s[i] for i in range(k)]
+        coef = cho_solve_small(L, b)
         resid = y - sum(coef[i] / s[i] * cols[i] for i in range(k))
         logdet = logdet + 2 * sum(jnp.log(L[i][i]) + jnp.log(s[i]) for i in range(k))
         return (
@@ -477,12 +462,12 @@ def _log_prior(model, theta, w, log_sigma, args):
         a, b, norm = args["prior"][name][0], args["prior"][name][1], args["prior"][name][2]
         if name == "zeta":
             u = jnp.atleast_1d(theta["zeta_u"])
-            z = _cal._lsq.to_interval(u, 0.0, ZETA_MAX)
+            z = to_interval(u, 0.0, ZETA_MAX)
             # dζ/du = ζ (ζmax − ζ)/ζmax
             jac = jnp.log(z) + jnp.log(ZETA_MAX - z) - math.log(ZETA_MAX)
             lp = lp + jnp.sum(prior_logpdf(dist, z, a, b, norm) + jac)
         elif name == "f1_hz":  # f_1 ∝ √κ: d f_1 / d log κ = f_1 / 2
-            f1 = _omega(model.problem, w)[0] / (2 * jnp.pi)
+            f1 = w.omega_rad_s[0] / (2 * jnp.pi)
             lp = lp + prior_logpdf(dist, f1, a, b, norm) + jnp.log(f1 / 2)
         elif name == "kappa":
             kappa = jnp.exp(theta["log_kappa"])
@@ -499,23 +484,20 @@ def log_prob_one(model: _Model, z, args, tables=None):
     ``tables``: from :func:`_grid_tables` at ``z``, where it says the gridded free-decay
     columns are exact; those recordings are then evaluated on their grids.
     """
-    theta = model.unravel(z[: model.n_theta])
+    problem = args["problem"]
+    theta = _unravel(problem, model.marginal)(z[: model.n_theta])
     log_sigma = z[model.n_theta :]
-    w = _cal._whisker(model.problem, theta)
+    w = problem.whisker(theta)
     lp = _log_prior(model, theta, w, log_sigma, args)
     degrees = model.grid_degrees if tables is not None else (None,) * model.n_rec
     tables = tables if tables is not None else (None,) * model.n_rec
-    for j, (spec, rec, d) in enumerate(
-        zip(model.problem.specs, theta["recs"], args["recs"], strict=True)
-    ):
+    recs = theta.get("recs") or [{}] * model.n_rec
+    for j, (rec, rp, grid) in enumerate(zip(problem.recordings, recs, args["grids"], strict=True)):
         lp = lp + _rec_loglik(
-            model, spec, rec, d, w, log_sigma[j], args["nu"], degrees[j], tables[j]
+            model, rec, rp, grid, w, log_sigma[j], args["nu"], degrees[j], tables[j]
         )
-    if model.problem.static_x_m is not None:
-        s = args["static"]
-        x, l = model.problem.static_x_m, model.problem.length_m
-        pred = theta["static_d0"] + s["force"] * (x**2 * (3 * l - x) / 6) / jnp.exp(theta["log_EI"])
-        lp = lp - 0.5 * jnp.sum(((pred - s["deflection"]) / s["sigma"]) ** 2)
+    if problem.static_test is not None:
+        lp = lp - 0.5 * jnp.sum(problem.static_residuals(theta) ** 2)
     return jnp.where(jnp.isfinite(lp), lp, -jnp.inf)
 
 
@@ -546,12 +528,13 @@ def _grid_tables(model, z, args):
     """Per recording, :func:`_decay_tables` at ``z`` (None where not gridded), and whether
     the gridded columns are exact there: ``ω_i max|δ|`` within each mode's Taylor radius
     (False for a non-finite ``ω``)."""
-    theta = model.unravel(z[: model.n_theta])
-    w = _cal._whisker(model.problem, theta)
-    omega = _omega(model.problem, w)
+    problem = args["problem"]
+    theta = _unravel(problem, model.marginal)(z[: model.n_theta])
+    w = problem.whisker(theta)
+    omega = w.omega_rad_s
     tables, ok = [], jnp.array(True)
-    recs = zip(model.problem.specs, args["recs"], model.grid_degrees, strict=True)
-    for j, (spec, d, degrees) in enumerate(recs):
+    recs = zip(problem.recordings, args["grids"], model.grid_degrees, strict=True)
+    for j, (rec, grid, degrees) in enumerate(recs):
         if degrees is None:
             tables.append(None)
             continue
@@ -560,9 +543,9 @@ def _grid_tables(model, z, args):
             m = len(degrees)
             c = theta["recs"][j]["c"]
             weight = (c[2 : 2 + m], -c[2 + m : 2 + 2 * m])
-        tables.append(_decay_tables(model.problem, spec, w, d["grid"], weight))
+        tables.append(_decay_tables(rec, w, grid, weight))
         radius = jnp.asarray([_taylor_radius(p) for p in degrees])
-        ok = ok & jnp.all(omega * d["grid"]["dmax"] <= radius)
+        ok = ok & jnp.all(omega * grid["dmax"] <= radius)
     return tables, ok
 
 
@@ -735,16 +718,17 @@ def setup_posterior(
     table = prior if prior is not None else record.extra.get("prior")
     user = parse_prior(table)
 
-    lap = _laplace(record, obs, static, n_modes, zeta_per_mode, f1_start_hz)
-    problem, args, theta_hat, cov_full, unravel_full, sig = lap
+    problem, theta_hat, cov_full, sig = _laplace(
+        record, obs, static, n_modes, zeta_per_mode, pin, f1_start_hz
+    )
     # Sampled space: the calibration's flat vector (without c when marginalised) + log σ_j.
-    idx_tree = unravel_full(jnp.arange(cov_full.shape[0], dtype=float))
+    idx_tree = problem.unflatten(jnp.arange(cov_full.shape[0], dtype=float))
     if marginalize:
         theta_s, idx_tree = _drop_c(theta_hat), _drop_c(idx_tree)
     else:
         theta_s = theta_hat
-    flat_s, unravel_s = _cal._ravel(theta_s)
-    idx = np.asarray(_cal._ravel(idx_tree)[0]).astype(int)
+    flat_s = ravel_pytree(theta_s)[0]
+    idx = np.asarray(ravel_pytree(idx_tree)[0]).astype(int)
     n_theta = int(flat_s.size)
     n_rec = len(obs)
     n_samples = np.array([o.t.size for o in obs], float)
@@ -754,7 +738,7 @@ def setup_posterior(
     cov[n_theta:, n_theta:] = np.diag(1.0 / (2 * n_samples))
     names = _names(theta_s, n_rec)
 
-    w_hat = _cal._whisker(problem, theta_s)
+    w_hat = problem.whisker(theta_s)
     f1_hat = float(w_hat.natural_frequencies_hz[0])
     priors = {
         k: {"dist": v[0], "a": v[1], "b": v[2], "default": True}
@@ -766,26 +750,21 @@ def setup_posterior(
         priors[k] = {"dist": v[0], "a": v[1], "b": v[2], "default": False}
     # Free decays on near-uniform timestamps get the gridded columns, with Taylor degrees
     # for the Laplace centre's frequencies (times a margin).
-    omega_hat = np.asarray(_omega(problem, w_hat))
-    recs, grid_degrees = [], []
-    for spec, d in zip(problem.specs, args["recs"], strict=True):
-        d = {k: v for k, v in d.items() if k != "weight"}
-        degrees = None
-        if spec.excitation == "decay" and np.size(d["t"]) >= 16:
-            grid = _decay_grid(np.asarray(d["t"]), np.asarray(d["y"]))
+    omega_hat = np.asarray(w_hat.omega_rad_s)
+    grids, grid_degrees = [], []
+    for rec in problem.recordings:
+        degrees, grid_arrays = None, None
+        if rec.excitation == "decay" and np.size(rec.t) >= 16:
+            grid = _decay_grid(np.asarray(rec.t), np.asarray(rec.y))
             deg = [_taylor_degree(_TAYLOR_MARGIN * om * grid["dmax"]) for om in omega_hat]
             if None not in deg:
                 degrees = tuple(deg)
-                d["grid"] = {k: jnp.asarray(v) for k, v in grid.items()}
-        recs.append(d)
+                grid_arrays = {k: jnp.asarray(v) for k, v in grid.items()}
+        grids.append(grid_arrays)
         grid_degrees.append(degrees)
     args = {
-        "recs": recs,
-        **(
-            {"static": {k: v for k, v in args["static"].items() if k != "fit"}}
-            if "static" in args
-            else {}
-        ),
+        "problem": problem,
+        "grids": grids,
         "prior": {
             k: jnp.asarray([p["a"], p["b"], float(prior_log_norm(p["dist"], p["a"], p["b"]))])
             for k, p in priors.items()
@@ -793,8 +772,6 @@ def setup_posterior(
         "nu": jnp.asarray(float(nu)),
     }
     model = _Model(
-        problem=problem,
-        unravel=unravel_s,
         n_theta=n_theta,
         n_rec=n_rec,
         likelihood=likelihood,
@@ -827,27 +804,26 @@ def _names(theta, n_rec):
     return names + [f"log_sigma[{j}]" for j in range(n_rec)]
 
 
-def _laplace(record, obs, static, n_modes, zeta_per_mode, f1_start_hz):
-    """The calibration fit (private helpers of :mod:`whiskerid._calibrate`, read-only)."""
-    nominal = record.whisker().with_modes(n_modes)
-    problem, args, recs0 = _cal._prepare(
-        record, obs, static, n_modes, zeta_per_mode, float(nominal.rho_a)
+def _laplace(record, obs, static, n_modes, zeta_per_mode, pin, f1_start_hz):
+    """The calibration fit: its problem (recordings weighted by their residual scale), the
+    optimum, its covariance (a small diagonal one where that is not finite) and each
+    recording's residual scale σ_j in normalised units."""
+    cal = calibrate(
+        record,
+        obs,
+        static=static,
+        n_modes=n_modes,
+        zeta_per_mode=zeta_per_mode,
+        pin=pin,
+        f1_start_hz=f1_start_hz,
     )
-    f1_nom = f1_start_hz or float(nominal.natural_frequencies_hz[0])
-    zeta_nom = float(np.mean(nominal.zeta))
-    theta0 = _cal._start(problem, args, recs0, obs, nominal, f1_nom, zeta_nom, static)
-    flat0, unravel = _cal._ravel(theta0)
-    fn = jax.tree_util.Partial(_cal._residuals_entry, problem, unravel)
-    res = _cal._fit(fn, flat0, args, "levenberg-marquardt", 400)
-    args = _cal._reweight(problem, unravel, res.value, args)
-    res = _cal._fit(fn, res.value, args, "levenberg-marquardt", 400)
-    cov, _ = _cal._covariance_jit(fn, res.value, args)
-    cov = np.asarray(cov)
+    problem, cov = cal.problem, np.asarray(cal.covariance)
     if not np.all(np.isfinite(cov)):
-        scale = 1e-4 * np.maximum(np.abs(np.asarray(res.value)), 1e-2)
+        flat = np.asarray(problem.flatten(cal.optimum))
+        scale = 1e-4 * np.maximum(np.abs(flat), 1e-2)
         cov = np.diag(scale**2)
-    sig = np.array([1.0 / float(d["weight"]) for d in args["recs"]])
-    return problem, args, unravel(res.value), cov, unravel, sig
+    sig = np.array([1.0 / float(r.weight) for r in problem.recordings])
+    return problem, cal.optimum, cov, sig
 
 
 # --------------------------------------------------------------------------- sampling
@@ -1012,26 +988,20 @@ class Posterior:
 def derived_quantities(prob: Problem, z: np.ndarray) -> tuple[np.ndarray, list[str]]:
     """Reported quantities (f_1, ζ, κ, EI or C …, σ per recording) at points ``z``."""
     m = prob.model
-    rec = prob.record
-    nominal = rec.whisker().with_modes(m.problem.n_modes)
-    fn = _cal._derived_fn(
-        m.problem,
-        m.unravel,
-        prob.pin,
-        m.problem.static_x_m is not None,
-        float(nominal.EI),
-        rec.structure,
+    problem = prob.args["problem"]
+    names = reported_names(problem)
+    vals = np.asarray(
+        _derived_batch(problem, m.marginal, jnp.asarray(np.asarray(z)[:, : m.n_theta]))
     )
-    names = list(fn(jnp.asarray(prob.z0[: m.n_theta]))[1])
-    vals = np.asarray(_derived_batch(fn, jnp.asarray(np.asarray(z)[:, : m.n_theta])))
     sig = np.exp(np.asarray(z)[:, m.n_theta :]) * np.asarray(prob.y_std)
     names += [f"sigma_{j + 1}" for j in range(m.n_rec)]
     return np.concatenate([vals, sig], axis=1), names
 
 
 @eqx.filter_jit
-def _derived_batch(fn, z):
-    return jax.vmap(lambda v: fn(v)[0])(z)
+def _derived_batch(problem, marginal, z):
+    unravel = _unravel(problem, marginal)
+    return jax.vmap(lambda v: jnp.stack(list(problem.reported(unravel(v)).values())))(z)
 
 
 def _tau(x: np.ndarray) -> np.ndarray:
@@ -1148,7 +1118,7 @@ def _provenance(prob, walkers, seed, move):
         if prob.model.marginal
         else "sampled (flat prior)",
         "noise": "unknown sigma per recording, sampled as log sigma",
-        "n_modes": prob.model.problem.n_modes,
+        "n_modes": prob.args["problem"].n_modes,
         "pin": prob.pin,
         "priors": prob.priors,
         "start": "Laplace approximation of the calibration fit",
