@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 import whiskerid as wi
+from whiskerid import posterior as P
 from whiskerid.fit import RecordingModel, recording_design
-from whiskerid.posterior import _posterior as P
+from whiskerid.posterior import _likelihood as L
 
 F1, ZETA, NOISE, N = 48.0, 0.02, 0.05, 500
 
@@ -46,7 +47,7 @@ def test_log_prob_matches_direct_computation(prob):
     z = prob.z0 + np.array([1e-4, 0.01, 0.02])
     m = prob.model
     problem = prob.args["problem"]
-    theta = P._unravel(problem, m.marginal)(z[: m.n_theta])
+    theta = L._unravel(problem, m.marginal)(z[: m.n_theta])
     w = problem.whisker(theta)
     rec = problem.recordings[0]
     D, g = recording_design(rec, w, theta["recs"][0])
@@ -95,7 +96,7 @@ def test_fast_decay_columns_equal_the_calibration_design(modes, offsets):
     t = np.sort(np.random.default_rng(1).uniform(0, 2.0, 700))
     rec = decay_recording(t, modes, offsets)
     D, g = recording_design(rec, w, {})
-    cols, g2 = P._columns(rec, w, {})
+    cols, g2 = L._columns(rec, w, {})
     np.testing.assert_allclose(np.stack(cols, axis=1), D, rtol=0, atol=1e-14)
     np.testing.assert_array_equal(g2, g)
 

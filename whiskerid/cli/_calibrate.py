@@ -1,4 +1,4 @@
-"""``whiskerid calibrate``: fit a whisker's κ (f_1), ζ and EI or C to recordings (NOTES §7)."""
+"""``whiskerid calibrate``: fit a whisker's κ (f_1), ζ and EI or C to recordings."""
 
 import argparse
 from pathlib import Path

@@ -1,4 +1,4 @@
-"""``whiskerid posterior``: emcee posteriors of ζ, f_1, κ (EI or C) from recordings (NOTES §7)."""
+"""``whiskerid posterior``: emcee posteriors of ζ, f_1, κ (EI or C) from recordings."""
 
 import argparse
 import sys

@@ -1,6 +1,6 @@
 """Calibrate a whisker from its recordings: stiffness (κ, EI or C), damping ζ, nuisances.
 
-What the data determine (NOTES §3). Vibration records alone determine the natural
+What the data determine. Vibration records alone determine the natural
 frequencies, hence ``κ = EI/(ρa)`` (equivalently ``f_1``), and the modal damping ``ζ``;
 ``EI`` and ``ρa`` (so the coil factor ``C``) only as their ratio. The fit is therefore
 parametrised in identifiable quantities, ``log κ`` and ``ζ`` (a logistic transform keeps
@@ -17,28 +17,20 @@ uncertainty propagated through the Jacobian:
 A tip mass makes the mode-frequency ratios depend on ``μ = M_t/(ρa l)``, so on ρa, but only
 weakly; μ is taken from the record unless a static test fixes ρa.
 
-The model of one recording is linear in most nuisances, ``y = D(θ) c + g(θ)``: the columns
-of ``D`` are the free (damped) modal terms ``e^{σ_i t} cos ω_d,i t`` and ``sin`` (any
-initial condition, any observable), an offset, a linear drift and, when its amplitude or
-phase is unknown, the forced response to the base motion; ``g`` is the forced response when
-gain and amplitude are both known (a sine's start time ``τ`` then stays a parameter). For
-ADS1115 codes every column is averaged over the conversion period (the converter's sinc
-response). Start values come from the data: a grid over ``(κ, ζ)`` seeded by the spectral
-peaks (sub-bin interpolation, aliases unfolded with the nominal ``f_1``) and the envelope's
-logarithmic decay, with the linear coefficients solved exactly at every grid point
-(variable projection); the best point starts a Levenberg–Marquardt fit of all parameters
-(optimistix, ``throw=False``, a status per fit). The covariance is ``s²(JᵀJ)⁻¹`` at the
-optimum (:func:`whiskerid._lsq.covariance`); with several recordings (or a static test) each
-block is weighted by its own residual scale from a first pass.
+The model (:class:`whiskerid.fit.FitProblem`, module ``_problem``) is linear in most
+nuisances, ``y = D(θ) c + g(θ)``. Start values come from the data (module ``_start``: a
+grid over ``(κ, ζ)`` seeded by the spectral peaks and the envelope's logarithmic decay, with
+the linear coefficients solved exactly at every grid point); the best point starts a
+Levenberg–Marquardt fit of all parameters (optimistix, ``throw=False``, a status per fit).
+The covariance is ``s²(JᵀJ)⁻¹`` at the optimum; with several recordings (or a static test)
+each block is weighted by its own residual scale from a first pass.
 
 jaxopt is not used as a second backend: version 0.8.5 warns on import that it is no longer
 maintained (which fails a test run with ``filterwarnings = error``) and its
-Levenberg–Marquardt ignored ``tol`` (always ``maxiter`` steps, NOTES §9); the bounds it
+Levenberg–Marquardt ignored ``tol`` (always ``maxiter`` steps); the bounds it
 could add are handled here by transforms. ``scipy.optimize.least_squares`` and lmfit are
 compared in ``benchmarks/calibrate.py`` instead.
 
-:func:`fit_windows` fits many short windows at once (``vmap``) for per-window modal
-features (damped frequency, ζ, amplitude); one bad window only flags itself.
 """
 
 import datetime

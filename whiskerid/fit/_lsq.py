@@ -2,7 +2,7 @@
 
 Residual functions have the optimistix signature ``fn(params, args) -> residuals``. Fits
 never raise on a failed solve (``throw=False``): each returns a status, so one bad fit in a
-``vmap``-ed batch does not spoil the others (NOTES §9). optimistix has no bounds: positive or
+``vmap``-ed batch does not spoil the others. optimistix has no bounds: positive or
 bounded parameters are fitted through the transforms below.
 """
 
