@@ -1,13 +1,13 @@
 """Benchmark: the same calibration model and data fitted by optimistix, SciPy and lmfit.
 
 Model: the damped oscillation ``offset + e^{−σt}(a cos ω_d t + b sin ω_d t)`` that
-:func:`whiskerid.fit_windows` fits (``whiskerid.fit._calibrate.window_model_residuals``; five
+:func:`whiskerid.fit_windows` fits (``whiskerid.fit.window_model_residuals``; five
 parameters: log f_d, logit ζ, a, b, offset), on
 
 * one recording: the paper whisker plucked, exact model, 10 s at 200 Hz, SNR 30 dB
   (deflection at the Hall sensor), fitted by optimistix Levenberg–Marquardt (jitted),
   ``scipy.optimize.least_squares(method="lm")`` and lmfit (``leastsq``), all on the same five
-  parameters from the same data-derived start values (:func:`whiskerid.fit._calibrate.window_start`)
+  parameters from the same data-derived start values (:func:`whiskerid.fit.window_start`)
   and with the same relative tolerance 1e-8 on parameters and cost (and again at 1e-10,
   calibrate()'s default): compile time, warm time per fit, steps or function evaluations, and
   the fitted values;
@@ -30,9 +30,9 @@ import jax.numpy as jnp
 import numpy as np
 
 import whiskerid as wi
+from whiskerid.fit import ZETA_MAX
 from whiskerid.fit import _lsq as _lsq
-from whiskerid.fit._calibrate import (
-    ZETA_MAX,
+from whiskerid.fit._windows import (
     _vp_fit,
     _window_candidates,
     window_model_residuals,

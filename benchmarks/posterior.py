@@ -77,8 +77,9 @@ import jax.numpy as jnp
 import numpy as np
 
 import whiskerid as wi
-from whiskerid.fit import _calibrate as cal
-from whiskerid.posterior import _posterior as P
+from whiskerid import posterior as P
+from whiskerid.fit import ZETA_MAX, from_interval, recording_design, to_interval
+from whiskerid.posterior import _likelihood as L
 
 F1, ZETA, NOISE, N = 48.0, 0.02, 0.05, 500
 
@@ -128,16 +129,17 @@ def run_lmfit(prob, walkers, steps):
     import lmfit
 
     m = prob.model
-    d = prob.args["recs"][0]
-    theta0 = m.unravel(jnp.asarray(prob.z0[: m.n_theta]))
+    problem = prob.args["problem"]
+    rec = problem.recordings[0]
+    theta0 = L._unravel(problem, m.marginal)(jnp.asarray(prob.z0[: m.n_theta]))
 
     @jax.jit
     def resid(log_kappa, zeta, c):
-        u = cal._lsq.from_interval(zeta, 0.0, cal.ZETA_MAX)
+        u = from_interval(zeta, 0.0, ZETA_MAX)
         theta = {"log_kappa": log_kappa, "zeta_u": u, "recs": [{"c": c}]}
-        w = cal._whisker(m.problem, theta)
-        D, g = cal._design(m.problem, m.problem.specs[0], w, theta["recs"][0], d)
-        return D @ c + g - d["y"]
+        w = problem.whisker(theta)
+        D, g = recording_design(rec, w, theta["recs"][0])
+        return D @ c + g - rec.y
 
     def fcn(params):
         v = params.valuesdict()
@@ -148,8 +150,8 @@ def run_lmfit(prob, walkers, steps):
 
     params = lmfit.Parameters()
     params.add("log_kappa", value=float(theta0["log_kappa"]))
-    zeta0 = float(cal._lsq.to_interval(theta0["zeta_u"], 0.0, cal.ZETA_MAX))
-    params.add("zeta", value=zeta0, min=0.0, max=cal.ZETA_MAX)
+    zeta0 = float(to_interval(theta0["zeta_u"], 0.0, ZETA_MAX))
+    params.add("zeta", value=zeta0, min=0.0, max=ZETA_MAX)
     for i, ci in enumerate(np.asarray(theta0["recs"][0]["c"])):
         params.add(f"c{i}", value=float(ci))
     params.add("__lnsigma", value=float(prob.z0[-1]), min=math.log(1e-6), max=math.log(10.0))

@@ -18,7 +18,8 @@ import time
 import numpy as np
 
 import whiskerid as wi
-from whiskerid.posterior import _posterior as P
+from whiskerid import posterior as P
+from whiskerid.posterior import _likelihood as L
 
 F1, ZETA, NOISE, N = 48.0, 0.02, 0.05, 500
 
@@ -75,7 +76,7 @@ def nuts(walkers: int, steps: int, nuts_samples: int) -> dict:
     t_emcee = time.perf_counter() - t0
 
     def potential(z):
-        return -P.log_prob_one(prob.model, z, prob.args)
+        return -L.log_prob_one(prob.model, z, prob.args)
 
     t0 = time.perf_counter()
     mcmc = MCMC(

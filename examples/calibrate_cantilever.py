@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 import whiskerid as wi
-from whiskerid.fit._calibrate import G0, release_time
+from whiskerid.fit import G0, release_time
 
 ROOT = Path(__file__).resolve().parents[1]
 MEASURED_F1 = {30: 16.49, 50: 6.02}  # the data README (authors' FFT peaks)

@@ -31,8 +31,8 @@ from pathlib import Path
 import numpy as np
 
 import whiskerid as wi
-from whiskerid.fit._calibrate import G0, release_time
-from whiskerid.posterior import _posterior as P
+from whiskerid import posterior as P
+from whiskerid.fit import G0, release_time
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -10,7 +10,7 @@ import pytest
 from helpers import ALU
 
 import whiskerid as wi
-from whiskerid.fit._calibrate import GTOL, release_time
+from whiskerid.fit import GTOL, release_time
 from whiskerid.fit._lsq import gradient_cosine
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "cantilever"
@@ -220,7 +220,7 @@ def test_fit_windows_agrees_with_scipy_and_sees_fast_decays():
     for decays over within a tenth of the window (a Hann-window spectrum misses them)."""
     import scipy.optimize
 
-    from whiskerid.fit._calibrate import ZETA_MAX, window_start
+    from whiskerid.fit import ZETA_MAX, window_start
 
     rate, m = 200.0, 200
     t = np.arange(m) / rate
@@ -255,16 +255,19 @@ def test_fit_windows_agrees_with_scipy_and_sees_fast_decays():
 
 
 def test_closed_form_adc_average_of_free_columns_equals_the_sampled_average():
-    from whiskerid.fit._calibrate import _averaged, _free_columns, _free_columns_averaged
+    from whiskerid.fit import decay_rates, free_decay_columns
 
     w = wi.paper_record().whisker().with_modes(3)
+    sigma, wd = decay_rates(w.omega_rad_s, w.zeta)
     t = jnp.sort(jnp.asarray(np.random.default_rng(1).uniform(0, 2, 500)))
-    offsets = tuple(float(x) for x in np.asarray(wi.paper_record().adc.averaging_offsets()))
-    sampled = _averaged(lambda tt: _free_columns(w, tt), t, offsets)
-    closed = _free_columns_averaged(w, t, offsets)
+    offsets = wi.paper_record().adc.averaging_offsets()
+    point = lambda tt: jnp.concatenate(free_decay_columns(tt[:, None], sigma, wd), axis=1)
+    tt = t[:, None] + offsets[None, :]
+    sampled = point(tt.reshape(-1)).reshape(t.size, offsets.size, -1).mean(axis=1)
+    closed = jnp.concatenate(free_decay_columns(t[:, None], sigma, wd, offsets), axis=1)
     assert float(jnp.max(jnp.abs(closed - sampled))) < 1e-12
     # and the average matters: it differs from the unaveraged columns
-    assert float(jnp.max(jnp.abs(closed - _free_columns(w, t)))) > 1e-3
+    assert float(jnp.max(jnp.abs(closed - point(t)))) > 1e-3
 
 
 def test_bad_observation_is_refused():

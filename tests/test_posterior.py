@@ -4,12 +4,14 @@ HDF5 resume, CLI round trip, and (slow) interval coverage."""
 import json
 import math
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
 import whiskerid as wi
-from whiskerid.fit import _calibrate as cal
-from whiskerid.posterior import _posterior as P
+from whiskerid import posterior as P
+from whiskerid.fit import RecordingModel, recording_design
+from whiskerid.posterior import _likelihood as L
 
 F1, ZETA, NOISE, N = 48.0, 0.02, 0.05, 500
 
@@ -24,6 +26,17 @@ def decay(seed=0, n=N, f1=F1, zeta=ZETA, noise=NOISE):
     return wi.Observation(t, y + noise * rng.standard_normal(n), name=f"decay-{seed}")
 
 
+def decay_recording(t, modes, offsets=None):
+    """A free decay's recording model at times ``t`` (data zero), as the fit builds it."""
+    t = jnp.asarray(t)
+    return RecordingModel(
+        t=t, y=jnp.zeros_like(t), weight=jnp.asarray(1.0), scale=jnp.asarray(1.0),
+        hb_m=jnp.asarray(1e-3), x_m=jnp.asarray(0.005), fb_hz=jnp.asarray(0.0),
+        avg_offsets=None if offsets is None else jnp.asarray(offsets), base_acc=None,
+        excitation="decay", observable="deflection", forced="none", n_cols=2 + 2 * modes,
+    )  # fmt: skip
+
+
 @pytest.fixture(scope="module")
 def prob():
     return P.setup_posterior(wi.paper_record(), decay(0), n_modes=1)
@@ -33,11 +46,12 @@ def test_log_prob_matches_direct_computation(prob):
     """Marginal likelihood (QR in JAX) vs NumPy lstsq + slogdet, plus priors by hand."""
     z = prob.z0 + np.array([1e-4, 0.01, 0.02])
     m = prob.model
-    theta = m.unravel(z[: m.n_theta])
-    w = cal._whisker(m.problem, theta)
-    d = prob.args["recs"][0]
-    D, g = cal._design(m.problem, m.problem.specs[0], w, theta["recs"][0], d)
-    D, y = np.asarray(D), np.asarray(d["y"]) - np.asarray(g)
+    problem = prob.args["problem"]
+    theta = L._unravel(problem, m.marginal)(z[: m.n_theta])
+    w = problem.whisker(theta)
+    rec = problem.recordings[0]
+    D, g = recording_design(rec, w, theta["recs"][0])
+    D, y = np.asarray(D), np.asarray(rec.y) - np.asarray(g)
     n, k = D.shape
     coef = np.linalg.lstsq(D, y, rcond=None)[0]
     rss = np.sum((y - D @ coef) ** 2)
@@ -77,13 +91,12 @@ def test_sincos_equals_sin_and_cos(span):
 
 @pytest.mark.parametrize(("modes", "offsets"), [(1, None), (3, None), (2, (0.0, -4e-4, -8e-4))])
 def test_fast_decay_columns_equal_the_calibration_design(modes, offsets):
-    """The posterior's own free-decay design equals ``_calibrate._design`` (to rounding)."""
+    """The posterior's own free-decay design equals the calibration's (to rounding)."""
     w = wi.paper_record().whisker().with_modes(modes)
-    spec = cal._Spec("decay", "deflection", "none", 2 + 2 * modes, 0.005, 0.0, offsets)
     t = np.sort(np.random.default_rng(1).uniform(0, 2.0, 700))
-    d = {"t": t, "y": np.zeros_like(t), "scale": 1.0, "hb": 1e-3}
-    D, g = cal._design(None, spec, w, {}, d)
-    cols, g2 = P._columns(None, spec, w, {}, d)
+    rec = decay_recording(t, modes, offsets)
+    D, g = recording_design(rec, w, {})
+    cols, g2 = L._columns(rec, w, {})
     np.testing.assert_allclose(np.stack(cols, axis=1), D, rtol=0, atol=1e-14)
     np.testing.assert_array_equal(g2, g)
 
@@ -268,7 +281,7 @@ def test_static_test_pins_ei():
     compliance = l**3 / (3 * ei)  # tip deflection per tip force
     noise = 0.01 * compliance * force.max()  # 1 % of the largest deflection
     defl = 1e-5 + compliance * force + noise * rng.standard_normal(force.size)
-    static = cal.StaticTest(force, defl)
+    static = wi.StaticTest(force, defl)
     post = P.sample_posterior(rec, decay(0), static=static, n_modes=1, walkers=32, steps=1000)
     q = post.params["EI"]
     # Expected 1σ of EI from least squares of δ on F (σ estimated from the residuals, as the

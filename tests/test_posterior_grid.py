@@ -11,8 +11,10 @@ import numpy as np
 import pytest
 
 import whiskerid as wi
-from whiskerid.fit import _calibrate as cal
-from whiskerid.posterior import _posterior as P
+from whiskerid import posterior as P
+from whiskerid.fit import RecordingModel
+from whiskerid.posterior import _grid as G
+from whiskerid.posterior import _likelihood as L
 
 F1, ZETA, NOISE, N = 48.0, 0.02, 0.05, 500
 
@@ -32,12 +34,23 @@ def decay(seed=0, n=N, jitter=2e-4, drop=None, wander=0.0):
     return wi.Observation(t[keep], y[keep], name=f"decay-{seed}")
 
 
+def _recording(t, modes, offsets=None):
+    """A free decay's recording model at times ``t`` (data zero), as the fit builds it."""
+    t = jnp.asarray(t)
+    return RecordingModel(
+        t=t, y=jnp.zeros_like(t), weight=jnp.asarray(1.0), scale=jnp.asarray(1.0),
+        hb_m=jnp.asarray(1e-3), x_m=jnp.asarray(0.005), fb_hz=jnp.asarray(0.0),
+        avg_offsets=None if offsets is None else jnp.asarray(offsets), base_acc=None,
+        excitation="decay", observable="deflection", forced="none", n_cols=2 + 2 * modes,
+    )  # fmt: skip
+
+
 def _direct(prob, z):
-    return np.asarray(jax.vmap(lambda v: P.log_prob_one(prob.model, v, prob.args))(z))
+    return np.asarray(jax.vmap(lambda v: L.log_prob_one(prob.model, v, prob.args))(z))
 
 
 def _grid_ok(prob, z):
-    return np.asarray(jax.vmap(lambda v: P._grid_tables(prob.model, v, prob.args)[1])(z))
+    return np.asarray(jax.vmap(lambda v: L._grid_tables(prob.model, v, prob.args)[1])(z))
 
 
 @pytest.mark.parametrize(
@@ -47,17 +60,17 @@ def _grid_ok(prob, z):
 def test_grid_columns_equal_direct_columns(modes, offsets, n):
     """Gridded columns (padding included) vs ``_columns`` on jittered, non-uniform times."""
     w = wi.paper_record().whisker().with_modes(modes)
-    spec = cal._Spec("decay", "deflection", "none", 2 + 2 * modes, 0.005, 0.0, offsets)
     rng = np.random.default_rng(3)
     t = 0.02 + np.arange(n) / 1000.0 + rng.uniform(-1e-4, 1e-4, n)
     y = rng.standard_normal(n)
-    grid = P._decay_grid(t, y)
+    grid = G._decay_grid(t, y)
     assert grid["dmax"] < 1.5e-4  # centred jitter of ±1e-4 s
     omega = np.asarray(w.omega_rad_s)
-    degrees = tuple(P._taylor_degree(o * grid["dmax"]) for o in omega)
+    degrees = tuple(G._taylor_degree(o * grid["dmax"]) for o in omega)
     gj = {k: jnp.asarray(v) for k, v in grid.items()}
-    cols = P._grid_columns(P._decay_tables(None, spec, w, gj), gj, degrees)
-    direct, _ = P._columns(None, spec, w, {}, {"t": t, "y": y})
+    rec = _recording(t, modes, offsets)
+    cols = G._grid_columns(G._decay_tables(rec, w, gj), gj, degrees)
+    direct, _ = L._columns(rec, w, {})
     mask = grid["mask"].ravel()
     assert mask.sum() == n and np.all(mask[n:] == 0)
     for c_grid, c_direct in zip(cols, direct, strict=True):
@@ -66,8 +79,8 @@ def test_grid_columns_equal_direct_columns(modes, offsets, n):
         assert np.all(flat[n:] == 0)  # padding contributes nothing to any sum
     # The sampled coefficients folded into the tables: Σ c_cos C + c_sin S in one column.
     c = rng.standard_normal((2, modes))
-    tables = P._decay_tables(None, spec, w, gj, (jnp.asarray(c[0]), jnp.asarray(-c[1])))
-    total = np.asarray(P._grid_columns(tables, gj, degrees, summed=True)[2]).ravel()[:n]
+    tables = G._decay_tables(rec, w, gj, (jnp.asarray(c[0]), jnp.asarray(-c[1])))
+    total = np.asarray(G._grid_columns(tables, gj, degrees, summed=True)[2]).ravel()[:n]
     expected = sum(c[0, i] * direct[2 + i] + c[1, i] * direct[2 + modes + i] for i in range(modes))
     np.testing.assert_allclose(total, expected, rtol=0, atol=1e-13)
 
@@ -107,12 +120,12 @@ def test_batch_falls_back_to_direct_columns():
     prob = P.setup_posterior(wi.paper_record(), decay(0), n_modes=1, marginalize=False)
     m = prob.model
     (degree,) = m.grid_degrees[0]
-    dmax = float(prob.args["recs"][0]["grid"]["dmax"])
+    dmax = float(prob.args["grids"][0]["dmax"])
     f1 = float(prob.record.whisker().natural_frequencies_hz[0])
     z = np.tile(prob.z0, (16, 1))
     # f_1 ∝ √κ: one walker at four times the f_1 the Taylor radius allows (still inside the
     # default prior, f̂/10 … 10 f̂).
-    f_far = 4 * P._taylor_radius(degree) / dmax / (2 * np.pi)
+    f_far = 4 * G._taylor_radius(degree) / dmax / (2 * np.pi)
     assert f_far < 10 * f1
     z[5, prob.names.index("log_kappa")] += 2 * math.log(f_far / f1)
     ok = _grid_ok(prob, z)
@@ -120,7 +133,7 @@ def test_batch_falls_back_to_direct_columns():
     lp, ref = prob.log_prob(z), _direct(prob, z)
     assert np.isfinite(ref[5])
     np.testing.assert_allclose(lp, ref, rtol=1e-14, atol=0)
-    forced = jax.vmap(lambda v: P.log_prob_one(m, v, prob.args, P._grid_tables(m, v, prob.args)[0]))
+    forced = jax.vmap(lambda v: L.log_prob_one(m, v, prob.args, L._grid_tables(m, v, prob.args)[0]))
     assert abs(float(forced(z)[5]) - ref[5]) > 1e-9  # what the fallback avoided
     # Without that walker the batch is gridded again (and equal to direct to rounding).
     z[5] = z[4]
@@ -136,7 +149,7 @@ def test_no_grid_for_irregular_timestamps():
     assert one.model.grid_degrees[0] is not None  # one mode: still within the cap
     three = P.setup_posterior(wi.paper_record(), obs, n_modes=3, marginalize=False)
     assert three.model.grid_degrees == (None,)
-    assert "grid" not in three.args["recs"][0]
+    assert three.args["grids"][0] is None
     z = three.z0 + 1e-4 * np.random.default_rng(2).standard_normal((4, three.z0.size))
     np.testing.assert_allclose(three.log_prob(z), _direct(three, z), rtol=1e-14, atol=0)
 
@@ -145,19 +158,19 @@ def test_no_grid_for_irregular_timestamps():
 def test_taylor_radius_bounds_the_truncation(degree):
     """Within ``_taylor_radius(p)`` the degree-p Taylor polynomial of e^x is within the
     tolerance relative to |e^x| (checked in extended precision on the circle)."""
-    r = P._taylor_radius(degree)
+    r = G._taylor_radius(degree)
     x = r * np.exp(1j * np.linspace(0, 2 * np.pi, 64, endpoint=False)).astype(np.clongdouble)
     poly = sum(x**k / math.factorial(k) for k in range(degree + 1))
     rel = np.abs(poly - np.exp(x)) / np.abs(np.exp(x))
-    assert np.max(rel) <= P._TAYLOR_TOL * 1.001
-    above = None if degree == P._TAYLOR_MAX_DEGREE else degree + 1
-    assert P._taylor_degree(r) == degree and P._taylor_degree(r * 1.01) == above
+    assert np.max(rel) <= G._TAYLOR_TOL * 1.001
+    above = None if degree == G._TAYLOR_MAX_DEGREE else degree + 1
+    assert G._taylor_degree(r) == degree and G._taylor_degree(r * 1.01) == above
 
 
 def test_packed_arguments_round_trip():
     args = {"a": jnp.arange(3.0), "b": [{"c": jnp.asarray(2.5)}, jnp.ones((2, 2))], "n": 7}
-    layout, flat = P._pack(args)
-    out = P._unpack(layout, flat)
+    layout, flat = L._pack(args)
+    out = L._unpack(layout, flat)
     assert jax.tree_util.tree_structure(out) == jax.tree_util.tree_structure(args)
     for x, y in zip(jax.tree_util.tree_leaves(out), jax.tree_util.tree_leaves(args), strict=True):
         assert x.dtype == np.asarray(y).dtype
@@ -176,12 +189,12 @@ def test_log_prob_gradients_direct_and_gridded(marginal):
     z = jnp.asarray(prob.z0) + 1e-3
 
     def direct(v):
-        return P.log_prob_one(prob.model, v, prob.args)
+        return L.log_prob_one(prob.model, v, prob.args)
 
     def gridded(v):
-        return P.log_prob_one(prob.model, v, prob.args, P._grid_tables(prob.model, v, prob.args)[0])
+        return L.log_prob_one(prob.model, v, prob.args, L._grid_tables(prob.model, v, prob.args)[0])
 
-    assert bool(P._grid_tables(prob.model, z, prob.args)[1])  # the gridded path is exact here
+    assert bool(L._grid_tables(prob.model, z, prob.args)[1])  # the gridded path is exact here
     for fn in (direct, gridded):
         check_grads(fn, (z,), order=1, modes=("fwd", "rev"), eps=1e-6)
     np.testing.assert_allclose(jax.grad(gridded)(z), jax.grad(direct)(z), rtol=1e-9, atol=1e-9)

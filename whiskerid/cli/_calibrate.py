@@ -1,14 +1,10 @@
-"""``whiskerid calibrate``: fit a whisker's κ (f_1), ζ and EI or C to recordings (NOTES §7)."""
+"""``whiskerid calibrate``: fit a whisker's κ (f_1), ζ and EI or C to recordings."""
 
 import argparse
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from .._choices import EXCITATIONS, OBSERVABLES, PINS, SOLVERS
 from ._common import HelpFormatter
-
-if TYPE_CHECKING:
-    from ..fit._calibrate import Observation
 
 
 def add_calibrate(sub, command_error) -> None:
@@ -115,35 +111,12 @@ def check_data_options(args) -> None:
         raise ValueError(f"--t-end {args.t_end:g} must be later than --t-start {args.t_start:g}")
 
 
-def _observable(args, rec, col: str) -> str:
-    from ..fit._calibrate import CalibrationError
-
-    if args.observable != "auto":
-        return args.observable
-    if col in OBSERVABLES:
-        return col
-    units = rec.meta.get("units", "")
-    by_units = {
-        "m": "deflection",
-        "m/s^2": "acceleration",
-        "V": "voltage",
-        "code": "adc",
-        "g": "acceleration",
-    }
-    if units in by_units:
-        return by_units[units]
-    raise CalibrationError(
-        f"{rec.source}: cannot tell what column {col!r} is; "
-        f"give --observable ({', '.join(OBSERVABLES)})"
-    )
-
-
 def _check_sampling(rec, record) -> None:
     """Refuse ``rate_hz`` metadata at odds with the timestamps, and sampling far too slow
     for the whisker's first mode (a time column in ms read as seconds is 1000 times too
     slow): a fit to either would end with numbers, all of them wrong."""
     from ..classify import recording_rate, timestamp_rate
-    from ..io._recording import RecordingError
+    from ..io import RecordingError
 
     recording_rate(rec)
     rate = timestamp_rate(rec.t)
@@ -155,93 +128,38 @@ def _check_sampling(rec, record) -> None:
         )
 
 
-def load_observation(path: Path, record, args) -> "Observation":
-    """Read one recording and turn it into an :class:`Observation` per the CLI flags."""
-    import numpy as np
-
-    from ..fit._calibrate import G0, CalibrationError, Observation, release_time
-    from ..io._recording import RecordingError, read_recording
+def load_observation(path: Path, record, args):
+    """Read one recording and turn it into an :class:`whiskerid.Observation` per the flags."""
+    from ..fit import observation_from_recording
+    from ..io import read_recording
 
     rec = read_recording(path, time_col=args.time_col)
     _check_sampling(rec, record)
-    signal_cols = [c for c in rec.columns if c != args.base_col]
-    if args.signal_col is not None:
-        col = args.signal_col
-        if col not in rec.columns:
-            raise RecordingError(f"{path}: no column {col!r}; columns are {['t', *rec.columns]}")
-    elif signal_cols:
-        col = signal_cols[0]
-    else:
-        raise RecordingError(f"{path}: no signal column")
-    observable = _observable(args, rec, col)
-    y = (
-        np.asarray(rec.columns[col], dtype=float)
-        * args.scale
-        * (G0 if args.units_g or rec.meta.get("units") == "g" else 1.0)
+    return observation_from_recording(
+        rec,
+        record,
+        signal_col=args.signal_col,
+        base_col=args.base_col,
+        observable=args.observable,
+        excitation=args.excitation,
+        scale=args.scale,
+        units_g=args.units_g,
+        fb_hz=args.fb,
+        hb_m=args.hb,
+        sensor_x_m=args.sensor_x,
+        fit_gain=args.fit_gain,
+        gain_known=args.gain_known,
+        t_start=args.t_start,
+        t_end=args.t_end,
     )
-    excitation = args.excitation
-    if excitation == "auto":
-        excitation = "base" if args.base_col else rec.meta.get("excitation", "decay")
-        if excitation not in EXCITATIONS:
-            excitation = "decay"
-    fb = args.fb if args.fb is not None else _meta_float(rec, "fb_hz")
-    hb = args.hb if args.hb is not None else _meta_float(rec, "hb_m")
-    base_acc = None
-    if excitation == "base":
-        if not args.base_col:
-            raise CalibrationError("--excitation base needs --base-col (base acceleration column)")
-        if args.base_col not in rec.columns:
-            raise RecordingError(
-                f"{path}: no column {args.base_col!r}; columns are {['t', *rec.columns]}"
-            )
-        base_acc = rec.columns[args.base_col]
-    if excitation == "sine" and fb is None:
-        raise CalibrationError(f"{path}: a sine excitation needs --fb (or fb_hz metadata)")
-    gain: float | None = 1.0
-    if observable in ("voltage", "adc") and not args.gain_known:
-        gain = None
-    if args.fit_gain:
-        gain = None
-    if gain is not None and observable in ("voltage", "adc"):
-        from ..fit._calibrate import _nominal_gain
-
-        gain = _nominal_gain(record, observable)
-    obs = Observation(
-        t=rec.t,
-        y=y,
-        excitation=excitation,
-        observable=observable,
-        x_m=args.sensor_x,
-        fb_hz=fb,
-        hb_m=hb,
-        base_acc=base_acc,
-        gain=gain,
-        name=path.name,
-        source=str(path),
-    )
-    t_start = args.t_start
-    if t_start is None and excitation == "decay":
-        t_start = release_time(obs.t, obs.y)
-    obs = obs.window(t_start, args.t_end)
-    if obs.t.size < 16:
-        raise RecordingError(f"{path}: only {obs.t.size} samples between --t-start and --t-end")
-    return obs
-
-
-def _meta_float(rec, key):
-    v = rec.meta.get(key)
-    try:
-        return None if v is None else float(v)
-    except ValueError:
-        return None
 
 
 def _cmd_calibrate(args, command_error) -> dict:
     import sys
 
-    from ..fit._calibrate import calibrate, read_static_test
-    from ..io._recording import check_out_path
-    from ..model._record import load_record
+    from ..fit import calibrate, read_static_test
+    from ..io import check_out_path
+    from ..model import load_record
 
     inputs = {"REC": args.recordings, "--whisker": args.whisker, "--static": args.static}
     check_out_path(args.out, "--out", inputs=inputs)

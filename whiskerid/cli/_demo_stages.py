@@ -162,7 +162,7 @@ def _calibration_stage(out: Path, record, *, plots: bool, say) -> dict:
 
 def _posterior_stage(out: Path, record, obs, *, plots: bool, say) -> dict:
     """emcee posterior of the calibrated pluck's ζ and f_1 (a short, converged run)."""
-    from ..posterior._posterior import sample_posterior
+    from ..posterior import sample_posterior
 
     say("[5] posterior of zeta with emcee: the calibrated pluck, 32 walkers x 1000 steps")
     # 1000 steps: tau is about 11 steps here with the default (differential-evolution)

@@ -1,4 +1,4 @@
-"""``whiskerid posterior``: emcee posteriors of ζ, f_1, κ (EI or C) from recordings (NOTES §7)."""
+"""``whiskerid posterior``: emcee posteriors of ζ, f_1, κ (EI or C) from recordings."""
 
 import sys
 from pathlib import Path
@@ -62,9 +62,9 @@ def add_posterior(sub, command_error) -> None:
 def _cmd_posterior(args, command_error) -> dict:
     import numpy as np
 
-    from ..fit._calibrate import read_static_test
-    from ..model._record import load_record
-    from ..posterior._posterior import sample_posterior
+    from ..fit import read_static_test
+    from ..model import load_record
+    from ..posterior import sample_posterior
 
     if args.out.exists() and not args.out.is_dir():
         raise command_error(f"--out {args.out} is a file; give a folder")
@@ -74,6 +74,7 @@ def _cmd_posterior(args, command_error) -> dict:
         raise command_error(f"--nu {args.nu!r} must be a positive number")
     check_data_options(args)
     _check_inputs_survive(args, command_error)
+
     record = load_record(args.fit)
     obs = [load_observation(p, record, args) for p in args.recordings]
     static = read_static_test(args.static) if args.static else None
@@ -125,7 +126,7 @@ OUTPUTS = ("posterior.toml", "chain.h5", "corner.png", "trace.png")
 
 def _check_inputs_survive(args, command_error) -> None:
     """Refuse inputs that are among the files written into --out (they would be replaced)."""
-    from ..io._recording import same_file
+    from ..io import same_file
 
     inputs = [*args.recordings, args.fit, args.static]
     for name in OUTPUTS:

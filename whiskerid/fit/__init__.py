@@ -1,16 +1,52 @@
-"""Fitting the model to recordings: least squares, calibration, window fits, start values."""
+"""Fitting the model to recordings: least squares, calibration, window fits, start values.
+
+The fit problem is public, so that other packages (the posterior) build on it:
+:class:`FitProblem` (built from a record and :class:`Observation` s) gives the whisker at a
+parameter pytree, each recording's design columns ``(D, g)``, the residuals
+(:func:`residuals` in optimistix's ``fn(y, args)`` form), the parameter flattening and the
+reported quantities; :func:`start_values`, :func:`solve` and :func:`covariance` are the
+calibration's steps, and :class:`Calibration` carries the problem, its optimum and the
+covariance.
+"""
 
 from .. import _jax_setup as _jax_setup
+from ._calibrate import GTOL as GTOL
 from ._calibrate import Calibration as Calibration
-from ._calibrate import CalibrationError as CalibrationError
-from ._calibrate import Observation as Observation
-from ._calibrate import StaticTest as StaticTest
-from ._calibrate import WindowFits as WindowFits
 from ._calibrate import calibrate as calibrate
-from ._calibrate import fit_windows as fit_windows
-from ._calibrate import read_static_test as read_static_test
+from ._decay import conversion_average as conversion_average
+from ._decay import decay_rates as decay_rates
+from ._decay import free_decay_columns as free_decay_columns
+from ._lsq import SOLVERS as SOLVERS
+from ._lsq import FitResult as FitResult
+from ._lsq import cho_solve_small as cho_solve_small
+from ._lsq import cholesky_small as cholesky_small
+from ._lsq import from_interval as from_interval
+from ._lsq import to_interval as to_interval
+from ._observation import G0 as G0
+from ._observation import CalibrationError as CalibrationError
+from ._observation import Observation as Observation
+from ._observation import StaticTest as StaticTest
+from ._observation import observation_from_recording as observation_from_recording
+from ._observation import read_static_test as read_static_test
+from ._observation import release_time as release_time
+from ._observation import sha256_of as sha256_of
+from ._problem import ZETA_MAX as ZETA_MAX
+from ._problem import FitProblem as FitProblem
+from ._problem import RecordingModel as RecordingModel
+from ._problem import StaticTestModel as StaticTestModel
+from ._problem import covariance as covariance
+from ._problem import nominal_gain as nominal_gain
+from ._problem import recording_design as recording_design
+from ._problem import reported_names as reported_names
+from ._problem import residuals as residuals
+from ._problem import solve as solve
 from ._signal import Peak as Peak
 from ._signal import amplitude_spectrum as amplitude_spectrum
 from ._signal import dominant_peaks as dominant_peaks
 from ._signal import find_peaks as find_peaks
 from ._signal import resample_uniform as resample_uniform
+from ._start import start_values as start_values
+from ._windows import WindowFits as WindowFits
+from ._windows import fit_windows as fit_windows
+from ._windows import window_model_residuals as window_model_residuals
+from ._windows import window_start as window_start

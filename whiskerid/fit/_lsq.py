@@ -2,7 +2,7 @@
 
 Residual functions have the optimistix signature ``fn(params, args) -> residuals``. Fits
 never raise on a failed solve (``throw=False``): each returns a status, so one bad fit in a
-``vmap``-ed batch does not spoil the others (NOTES §9). optimistix has no bounds: positive or
+``vmap``-ed batch does not spoil the others. optimistix has no bounds: positive or
 bounded parameters are fitted through the transforms below.
 """
 
@@ -70,10 +70,17 @@ def batch_least_squares(fn, y0, args, *, solver=None, max_steps: int = 256) -> F
     sets its own ``ok`` to False.
     """
 
-    def one(y, a):
-        return least_squares(fn, y, a, solver=solver, max_steps=max_steps)
+    solver = make_solver() if solver is None else solver
+    return _batch(fn, y0, args, solver, max_steps)
 
-    return eqx.filter_jit(eqx.filter_vmap(one))(y0, args)
+
+@eqx.filter_jit
+def _batch(fn, y0, args, solver, max_steps):
+    # A module-level jitted function: compiled once per residual function, solver and
+    # shapes, and reused by later calls (a closure jitted per call would compile every time).
+    return eqx.filter_vmap(
+        lambda y, a: least_squares(fn, y, a, solver=solver, max_steps=max_steps)
+    )(y0, args)
 
 
 def covariance(fn, y, args=None) -> tuple[jax.Array, jax.Array]:

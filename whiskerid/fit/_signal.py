@@ -1,6 +1,6 @@
 """Spectra and spectral peaks of recorded or simulated signals (NumPy; host-side helpers).
 
-Timestamps from a Pi are not uniform (NOTES §4); :func:`resample_uniform` puts a signal on a
+Timestamps from a Pi are not uniform; :func:`resample_uniform` puts a signal on a
 uniform grid by linear interpolation before any FFT.
 """
 

@@ -7,7 +7,9 @@ from ._recording import RECORDER_KEY as RECORDER_KEY
 from ._recording import Recording as Recording
 from ._recording import RecordingError as RecordingError
 from ._recording import TornRecordingWarning as TornRecordingWarning
+from ._recording import check_out_path as check_out_path
 from ._recording import check_samples as check_samples
 from ._recording import read_csv_table as read_csv_table
 from ._recording import read_recording as read_recording
+from ._recording import same_file as same_file
 from ._recording import write_csv as write_csv

@@ -14,6 +14,15 @@ differentiated implicitly, so gradients with respect to ``μ`` are exact. A conc
 fit of κ and ζ alone) takes the same bisection and Newton step in NumPy once per value
 (cached), so a jitted model carries the roots as constants instead of an 80-step loop.
 
+Why not ``optimistix.root_find`` with ``optimistix.Bisection``: it finds one root per call
+from ``options=dict(lower=..., upper=...)`` in a ``while_loop`` with a tolerance test, so all
+modes would be ``vmap``-ed (every lane then runs until the slowest stops) and the NumPy twin
+above would no longer take exactly the same steps as the traced path (the two agree to
+rounding because they do). The bracket here holds for every ``μ ≥ 0`` and every mode at
+once, 80 halvings take any bracket to rounding level, and the gradient is already the
+implicit-function one (the Newton step below), which is what ``optx.ImplicitAdjoint``
+would add; a library solver would change none of the numbers and add a loop per mode.
+
 Mode shapes use the dimensionless coordinate ``ξ = x / l``:
 
     φ(ξ) = cosh βξ − cos βξ − σ (sinh βξ − sin βξ),   σ = (cosh β + cos β)/(sinh β + sin β),

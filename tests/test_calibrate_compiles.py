@@ -1,0 +1,95 @@
+"""New numbers never recompile: whisker, sensor and excitation numbers are traced leaves of
+the fit problem, so calibrating (and sampling) other whiskers of the same structure and
+shapes reuses the compiled functions."""
+
+import jax
+import numpy as np
+import pytest
+
+import whiskerid as wi
+from whiskerid.model import CoilSpring
+
+_COMPILES: list[str] = []
+
+
+def _listen(event, duration, **kwargs):
+    if event == "/jax/core/compile/backend_compile_duration":
+        _COMPILES.append(event)
+
+
+jax.monitoring.register_event_duration_secs_listener(_listen)
+
+
+def _compiles(fn):
+    """Run ``fn`` and return how many XLA compilations it caused."""
+    before = len(_COMPILES)
+    fn()
+    return len(_COMPILES) - before
+
+
+#: (length, wire radius, coil radius, coils, sensor x, sine f_b, tip mass): other whiskers
+WHISKERS = [
+    (0.060, 0.50e-3, 4.5e-3, 13, 0.005, 30.0, 0.0),
+    (0.075, 0.45e-3, 4.0e-3, 15, 0.008, 22.0, 2e-4),
+]
+
+
+def _record(length, r_w, r_c, n, x_s, tip):
+    coil = CoilSpring(length, r_w, r_c, n, 8050.0, 70e9)
+    base = wi.paper_record()
+    return base.replace(structure=coil, sensor_position_m=x_s, tip_mass_kg=tip)
+
+
+def _recordings(record, fb):
+    """A pluck read by the ADS1115 and a sine read as deflection: same shapes per whisker."""
+    decay = wi.simulate(record, excitation="decay", observable="adc", rate_hz=200,
+                        duration_s=2, noise_db=35, seed=1, tip_deflection_m=2e-3)  # fmt: skip
+    sine = wi.simulate(record, excitation="sine", fb_hz=fb, hb_m=2e-4, observable="deflection",
+                       rate_hz=1000, duration_s=0.5, noise_db=40, seed=2)  # fmt: skip
+    return [
+        wi.Observation(decay.t, decay.signal(), excitation="decay", observable="adc", gain=None),
+        wi.Observation(
+            sine.t, sine.signal(), excitation="sine", observable="deflection", fb_hz=fb, hb_m=2e-4
+        ),
+    ]
+
+
+def test_calibrating_other_whiskers_compiles_nothing_new():
+    cals, counts = [], []
+    for length, r_w, r_c, n, x_s, fb, tip in WHISKERS:
+        record = _record(length, r_w, r_c, n, x_s, tip)
+        obs = _recordings(record, fb)
+        fit = lambda r=record, o=obs: cals.append(wi.calibrate(r, o, n_modes=1))
+        counts.append(_compiles(fit))
+    assert counts[0] > 0 and counts[1:] == [0] * (len(WHISKERS) - 1), counts
+    for cal, (length, r_w, r_c, n, x_s, _, tip) in zip(cals, WHISKERS, strict=True):
+        truth = float(_record(length, r_w, r_c, n, x_s, tip).whisker().natural_frequencies_hz[0])
+        assert cal.ok and cal.params["f1_hz"]["value"] == pytest.approx(truth, rel=2e-3)
+
+
+def test_posterior_log_density_of_other_whiskers_compiles_nothing_new():
+    counts = []
+    for length, r_w, r_c, n, x_s, _, tip in WHISKERS[:2]:
+        record = _record(length, r_w, r_c, n, x_s, tip)
+        sim = wi.simulate(record, excitation="decay", observable="deflection", rate_hz=1000,
+                          duration_s=0.3, noise_db=30, seed=0)  # fmt: skip
+        obs = wi.Observation(sim.t, sim.signal(), excitation="decay", observable="deflection")
+        prob = wi.setup_posterior(record, obs, n_modes=1)
+        z = prob.z0 + 1e-6 * np.arange(prob.z0.size)
+        counts.append(_compiles(lambda p=prob, z=z: p.log_prob(np.stack([p.z0, z]))))
+        assert np.all(np.isfinite(prob.log_prob(prob.z0)))
+    assert counts[1] == 0, counts
+
+
+def test_window_fits_at_other_rates_compile_nothing_new():
+    rng = np.random.default_rng(0)
+
+    def fit(rate):
+        t = np.arange(100) / rate
+        y = np.exp(-0.3 * t) * np.cos(2 * np.pi * 0.21 * rate * t) + 0.01 * rng.standard_normal(
+            (8, 100)
+        )
+        return wi.fit_windows(y, rate_hz=rate)
+
+    fit(200.0)
+    assert _compiles(lambda: fit(333.0)) == 0

@@ -1,0 +1,300 @@
+"""What a calibration fits: recordings (:class:`Observation`), static tests, and the reading
+of both from files (:func:`observation_from_recording`, :func:`read_static_test`)."""
+
+import hashlib
+from dataclasses import dataclass
+from dataclasses import replace as _replace
+from pathlib import Path
+
+import numpy as np
+
+from .._choices import EXCITATIONS, OBSERVABLES
+from ..io._recording import Recording, RecordingError, check_samples
+from ..model._record import WhiskerRecord
+
+G0 = 9.80665  # m/s² per g
+
+
+class CalibrationError(ValueError):
+    """Input that cannot be calibrated (message says what)."""
+
+
+# --------------------------------------------------------------------------- inputs
+@dataclass(frozen=True)
+class Observation:
+    """One recording prepared for calibration.
+
+    Attributes:
+        t: Sample times (s), increasing, uniform or not.
+        y: Samples in the observable's units (m, m/s², V or ADS1115 codes).
+        excitation: ``decay`` (pluck or tap, free vibration), ``sine`` (base excitation at
+            ``fb_hz``) or ``base`` (measured base acceleration ``base_acc`` at ``t``).
+        observable: ``deflection`` (relative, m), ``acceleration`` (absolute, m/s²),
+            ``voltage`` (Hall output, V) or ``adc`` (codes, averaged over the conversion).
+        x_m: Where the signal is read, from the clamp (m); the record's sensor by default.
+        fb_hz: Sine frequency (Hz), for ``sine``.
+        hb_m: Sine amplitude (m); None when unknown (then only gain·h_b is fitted).
+        base_acc: Base acceleration at ``t`` (m/s²), for ``base``.
+        gain: Observed units per unit of the physical observable (1 for deflection and
+            acceleration; V/m for voltage; codes/m for adc); None to fit it (as a product
+            with the excitation amplitude).
+        name: Label used in reports.
+        source: File it came from (hashed into the record), if any.
+    """
+
+    t: np.ndarray
+    y: np.ndarray
+    excitation: str = "decay"
+    observable: str = "deflection"
+    x_m: float | None = None
+    fb_hz: float | None = None
+    hb_m: float | None = None
+    base_acc: np.ndarray | None = None
+    gain: float | None = 1.0
+    name: str = "recording"
+    source: str | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "t", np.asarray(self.t, dtype=float))
+        object.__setattr__(self, "y", np.asarray(self.y, dtype=float))
+        check_samples(self.t, self.y, where=self.name, min_samples=16)
+        if self.excitation not in EXCITATIONS:
+            raise CalibrationError(
+                f"excitation must be one of {EXCITATIONS}, not {self.excitation!r}"
+            )
+        if self.observable not in OBSERVABLES:
+            raise CalibrationError(
+                f"observable must be one of {OBSERVABLES}, not {self.observable!r}"
+            )
+        if self.excitation == "sine" and not (self.fb_hz and self.fb_hz > 0):
+            raise CalibrationError(f"{self.name}: a sine excitation needs its frequency (--fb)")
+        if self.excitation == "base":
+            if self.base_acc is None:
+                raise CalibrationError(
+                    f"{self.name}: a base excitation needs the base acceleration"
+                )
+            acc = np.asarray(self.base_acc, dtype=float)
+            check_samples(self.t, acc, where=f"{self.name} (base acceleration)", min_samples=16)
+            object.__setattr__(self, "base_acc", acc)
+
+    def window(self, t_start: float | None = None, t_end: float | None = None) -> "Observation":
+        """The samples with ``t_start ≤ t ≤ t_end`` (base acceleration cut alike)."""
+        keep = np.ones(self.t.size, bool)
+        if t_start is not None:
+            keep &= self.t >= t_start
+        if t_end is not None:
+            keep &= self.t <= t_end
+        acc = None if self.base_acc is None else self.base_acc[keep]
+        return _replace(self, t=self.t[keep], y=self.y[keep], base_acc=acc)
+
+
+@dataclass(frozen=True)
+class StaticTest:
+    """A static test: forces at (or near) the tip and the deflections they cause.
+
+    ``δ_k = d₀ + F_k x²(3l − x)/(6 EI)`` (Euler–Bernoulli, force at the tip, deflection read at
+    ``x``, the tip by default); ``d₀`` absorbs the zero of the gauge.
+
+    Attributes:
+        force_n: Forces (N).
+        deflection_m: Deflections (m).
+        x_m: Where the deflection is read (m from the clamp); the tip when None.
+        source: File it came from, if any.
+    """
+
+    force_n: np.ndarray
+    deflection_m: np.ndarray
+    x_m: float | None = None
+    source: str | None = None
+
+    def __post_init__(self):
+        f = np.asarray(self.force_n, dtype=float)
+        d = np.asarray(self.deflection_m, dtype=float)
+        if f.shape != d.shape or f.ndim != 1 or f.size < 3:
+            raise CalibrationError("static test: need at least 3 (force, deflection) pairs")
+        if not (np.all(np.isfinite(f)) and np.all(np.isfinite(d))):
+            raise CalibrationError("static test: non-finite force or deflection")
+        if np.ptp(f) <= 0:
+            raise CalibrationError("static test: the forces must differ")
+        object.__setattr__(self, "force_n", f)
+        object.__setattr__(self, "deflection_m", d)
+
+
+def read_static_test(path: str | Path) -> StaticTest:
+    """Read a static test CSV with columns ``force_n`` and ``deflection_m`` (optional ``x_m``)."""
+    from ..io._recording import read_csv_table
+
+    path = Path(path)
+    if not path.exists():
+        raise RecordingError(f"{path}: no such static-test file")
+    table = read_csv_table(path)
+    need = ("force_n", "deflection_m")
+    missing = [c for c in need if c not in table.header]
+    if missing:
+        raise RecordingError(
+            f"{path}: static test needs columns {list(need)}; header is {table.header}"
+        )
+    col = {h: table.data[:, j] for j, h in enumerate(table.header)}
+    x = col.get("x_m")
+    return StaticTest(
+        force_n=col["force_n"],
+        deflection_m=col["deflection_m"],
+        x_m=None if x is None else float(x[0]),
+        source=str(path),
+    )
+
+
+def sha256_of(path: str | Path) -> str:
+    """SHA-256 of a file's bytes (provenance in the calibration record)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def release_time(t: np.ndarray, y: np.ndarray) -> float:
+    """When a pluck was released: the sample of largest deviation from the median."""
+    return float(t[int(np.argmax(np.abs(y - np.median(y))))])
+
+
+def nominal_gain(record: WhiskerRecord, observable: str) -> float:
+    """Observed units per physical unit from the record (V/m, codes/m) or 1."""
+    g = float(record.hall.gain_v_per_m)
+    return {"voltage": g, "adc": g / record.adc.lsb_v}.get(observable, 1.0)
+
+
+def observation_from_recording(
+    rec: Recording,
+    record: WhiskerRecord,
+    *,
+    signal_col: str | None = None,
+    base_col: str | None = None,
+    observable: str = "auto",
+    excitation: str = "auto",
+    scale: float = 1.0,
+    units_g: bool = False,
+    fb_hz: float | None = None,
+    hb_m: float | None = None,
+    sensor_x_m: float | None = None,
+    fit_gain: bool = False,
+    gain_known: bool = False,
+    t_start: float | None = None,
+    t_end: float | None = None,
+) -> Observation:
+    """An :class:`Observation` of one recording, as ``whiskerid calibrate`` reads it.
+
+    Args:
+        rec: The recording (:func:`whiskerid.read_recording`).
+        record: The whisker's record (its Hall gain and ADC when the gain is known).
+        signal_col: The signal column; the first column that is not ``base_col`` by default.
+        base_col: Column holding the measured base acceleration (m/s²).
+        observable: What the signal is, or ``auto``: from the column's name or the
+            ``units`` metadata.
+        excitation: ``decay``, ``sine``, ``base`` or ``auto``: from the ``excitation``
+            metadata, ``base`` when ``base_col`` is given, else ``decay``.
+        scale: Multiply the signal by this.
+        units_g: The signal is acceleration in g (also when the ``units`` metadata says g).
+        fb_hz: Sine frequency (Hz); the ``fb_hz`` metadata by default.
+        hb_m: Sine amplitude (m); the ``hb_m`` metadata by default, else unknown.
+        sensor_x_m: Where the signal is read (m from the clamp); the record's sensor
+            by default.
+        fit_gain: Fit the sensor gain (as a product with the excitation amplitude).
+        gain_known: Take a voltage's or ADC's gain from the record instead of fitting it.
+        t_start: Use samples from this time (s); for a decay the release is detected
+            (:func:`release_time`) when None.
+        t_end: Use samples up to this time (s).
+
+    Raises:
+        RecordingError: A missing column, or fewer than 16 samples in the window.
+        CalibrationError: What the signal is cannot be told, or a sine without its frequency.
+    """
+    path = rec.source or "recording"
+    name = Path(path).name
+    signal_cols = [c for c in rec.columns if c != base_col]
+    if signal_col is not None:
+        col = signal_col
+        if col not in rec.columns:
+            raise RecordingError(f"{path}: no column {col!r}; columns are {['t', *rec.columns]}")
+    elif signal_cols:
+        col = signal_cols[0]
+    else:
+        raise RecordingError(f"{path}: no signal column")
+    observable = _observable(observable, rec, col)
+    y = (
+        np.asarray(rec.columns[col], dtype=float)
+        * scale
+        * (G0 if units_g or rec.meta.get("units") == "g" else 1.0)
+    )
+    if excitation == "auto":
+        excitation = "base" if base_col else rec.meta.get("excitation", "decay")
+        if excitation not in EXCITATIONS:
+            excitation = "decay"
+    fb = fb_hz if fb_hz is not None else _meta_float(rec, "fb_hz")
+    hb = hb_m if hb_m is not None else _meta_float(rec, "hb_m")
+    base_acc = None
+    if excitation == "base":
+        if not base_col:
+            raise CalibrationError("--excitation base needs --base-col (base acceleration column)")
+        if base_col not in rec.columns:
+            raise RecordingError(
+                f"{path}: no column {base_col!r}; columns are {['t', *rec.columns]}"
+            )
+        base_acc = rec.columns[base_col]
+    if excitation == "sine" and fb is None:
+        raise CalibrationError(f"{path}: a sine excitation needs --fb (or fb_hz metadata)")
+    gain: float | None = 1.0
+    if observable in ("voltage", "adc") and not gain_known:
+        gain = None
+    if fit_gain:
+        gain = None
+    if gain is not None and observable in ("voltage", "adc"):
+        gain = nominal_gain(record, observable)
+    obs = Observation(
+        t=rec.t,
+        y=y,
+        excitation=excitation,
+        observable=observable,
+        x_m=sensor_x_m,
+        fb_hz=fb,
+        hb_m=hb,
+        base_acc=base_acc,
+        gain=gain,
+        name=name,
+        source=None if rec.source is None else str(rec.source),
+    )
+    if t_start is None and excitation == "decay":
+        t_start = release_time(obs.t, obs.y)
+    obs = obs.window(t_start, t_end)
+    if obs.t.size < 16:
+        raise RecordingError(f"{path}: only {obs.t.size} samples between --t-start and --t-end")
+    return obs
+
+
+def _observable(observable: str, rec: Recording, col: str) -> str:
+    if observable != "auto":
+        return observable
+    if col in OBSERVABLES:
+        return col
+    units = rec.meta.get("units", "")
+    by_units = {
+        "m": "deflection",
+        "m/s^2": "acceleration",
+        "V": "voltage",
+        "code": "adc",
+        "g": "acceleration",
+    }
+    if units in by_units:
+        return by_units[units]
+    raise CalibrationError(
+        f"{rec.source}: cannot tell what column {col!r} is; "
+        f"give --observable ({', '.join(OBSERVABLES)})"
+    )
+
+
+def _meta_float(rec, key):
+    v = rec.meta.get(key)
+    try:
+        return None if v is None else float(v)
+    except ValueError:
+        return None

@@ -1,0 +1,231 @@
+"""Set-up of a posterior: the calibration's Laplace approximation, the priors, the grids."""
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.flatten_util import ravel_pytree
+
+from .._choices import LIKELIHOODS
+from ..fit import Observation, calibrate
+from ..model._record import WhiskerRecord
+from ._grid import _TAYLOR_MARGIN, _decay_grid, _taylor_degree
+from ._likelihood import _batch_fn, _drop_c, _Model, _pack
+from ._prior import PosteriorError, default_prior, parse_prior, prior_log_norm
+
+
+# --------------------------------------------------------------------------- setup
+@dataclass
+class Problem:
+    """A posterior problem, ready to sample (from :func:`setup_posterior`).
+
+    Attributes:
+        model: Static model description.
+        args: Data and prior numbers (arrays).
+        z0: Laplace centre in the sampled space.
+        cov: Laplace covariance in the sampled space.
+        names: Names of the sampled coordinates.
+        priors: The priors used, name → ``(dist, a, b)``, and whether each was a default.
+        observations: The recordings.
+        record: The whisker's record.
+        pin: What fixes EI or C (as in the calibration).
+        y_std: Each recording's standard deviation (σ in observed units = σ_rel · y_std).
+    """
+
+    model: _Model
+    args: dict
+    z0: np.ndarray
+    cov: np.ndarray
+    names: list[str]
+    priors: dict[str, dict]
+    observations: list[Observation]
+    record: WhiskerRecord
+    pin: str
+    y_std: list[float]
+    nu: float = 4.0
+    # (args, compiled function, packed args) of the last call: looked up and packed once,
+    # not on every emcee step (hashing the model alone costs a microsecond or two).
+    _compiled: Any = field(default=None, init=False, repr=False, compare=False)
+
+    def log_prob(self, z) -> np.ndarray:
+        """Log-posterior at points ``z`` of shape ``(ndim,)`` or ``(walkers, ndim)``."""
+        fn, flat = self._batch()
+        return np.asarray(fn(np.atleast_2d(np.asarray(z, dtype=float)), flat))
+
+    def _batch(self):
+        """The compiled batch log-probability and the packed arguments (looked up and packed
+        on the first call and again only when ``args`` is replaced)."""
+        if self._compiled is None or self._compiled[0] is not self.args:
+            layout, flat = _pack(self.args)
+            self._compiled = (self.args, _batch_fn(self.model, layout), flat)
+        return self._compiled[1], self._compiled[2]
+
+    def _emcee_log_prob(self):
+        """:meth:`log_prob` for emcee's vectorised calls, ``(walkers, ndim)`` in, a list of
+        floats out: emcee converts the values one by one, and Python floats convert faster
+        than NumPy scalars (a few µs of the step)."""
+        fn, flat = self._batch()
+        return lambda z: np.asarray(fn(z, flat)).tolist()
+
+
+def setup_posterior(
+    record: WhiskerRecord,
+    observations: list[Observation] | Observation,
+    *,
+    static=None,
+    n_modes: int | None = None,
+    zeta_per_mode: bool = False,
+    pin: str = "auto",
+    likelihood: str = "gaussian",
+    nu: float = 4.0,
+    marginalize: bool | None = None,
+    prior: dict | None = None,
+    f1_start_hz: float | None = None,
+) -> Problem:
+    """Fit the calibration model (its Laplace approximation) and build the log-posterior.
+
+    Args:
+        record: The whisker's record (a calibrated one from ``whiskerid calibrate`` is a
+            good start); its ``[prior]`` table is used unless ``prior`` is given.
+        observations: Recordings of this whisker, sampled jointly.
+        static: Optional static test (as in :func:`whiskerid.calibrate`).
+        n_modes: Modes in the model; the record's ``[fit] n_modes`` (else 1) by default.
+        zeta_per_mode: One ζ per mode.
+        pin: What fixes EI or C (``auto``/``geometry``/``material``).
+        likelihood: ``gaussian`` or ``student``.
+        nu: Student-t degrees of freedom.
+        marginalize: Marginalise the linear coefficients analytically (Gaussian only; the
+            default there); ``False`` samples them.
+        prior: A ``[prior]`` table overriding the record's.
+        f1_start_hz: Centre of the calibration's start search (the record's f_1 otherwise).
+
+    Returns:
+        A :class:`Problem`.
+    """
+    obs = [observations] if isinstance(observations, Observation) else list(observations)
+    if not obs:
+        raise PosteriorError("no recordings")
+    if likelihood not in LIKELIHOODS:
+        raise PosteriorError(f"likelihood must be one of {LIKELIHOODS}, not {likelihood!r}")
+    if marginalize is None:
+        marginalize = likelihood == "gaussian"
+    if marginalize and likelihood != "gaussian":
+        raise PosteriorError("only the Gaussian likelihood can marginalise the linear nuisances")
+    if not nu > 0:
+        raise PosteriorError("nu must be > 0")
+    fit = record.extra.get("fit", {})
+    n_modes = int(n_modes or fit.get("n_modes", 1))
+    if pin == "auto" and fit.get("pin") in ("geometry", "material"):
+        pin = fit["pin"]
+    pin = "geometry" if pin == "auto" else pin
+    table = prior if prior is not None else record.extra.get("prior")
+    user = parse_prior(table)
+
+    problem, theta_hat, cov_full, sig = _laplace(
+        record, obs, static, n_modes, zeta_per_mode, pin, f1_start_hz
+    )
+    # Sampled space: the calibration's flat vector (without c when marginalised) + log σ_j.
+    idx_tree = problem.unflatten(jnp.arange(cov_full.shape[0], dtype=float))
+    if marginalize:
+        theta_s, idx_tree = _drop_c(theta_hat), _drop_c(idx_tree)
+    else:
+        theta_s = theta_hat
+    flat_s = ravel_pytree(theta_s)[0]
+    idx = np.asarray(ravel_pytree(idx_tree)[0]).astype(int)
+    n_theta = int(flat_s.size)
+    n_rec = len(obs)
+    n_samples = np.array([o.t.size for o in obs], float)
+    z0 = np.concatenate([np.asarray(flat_s), np.log(sig)])
+    cov = np.zeros((n_theta + n_rec,) * 2)
+    cov[:n_theta, :n_theta] = cov_full[np.ix_(idx, idx)]
+    cov[n_theta:, n_theta:] = np.diag(1.0 / (2 * n_samples))
+    names = _names(theta_s, n_rec)
+
+    w_hat = problem.whisker(theta_s)
+    f1_hat = float(w_hat.natural_frequencies_hz[0])
+    priors = {
+        k: {"dist": v[0], "a": v[1], "b": v[2], "default": True}
+        for k, v in default_prior(f1_hat).items()
+    }
+    if "kappa" in user:
+        priors.pop("f1_hz")
+    for k, v in user.items():
+        priors[k] = {"dist": v[0], "a": v[1], "b": v[2], "default": False}
+    # Free decays on near-uniform timestamps get the gridded columns, with Taylor degrees
+    # for the Laplace centre's frequencies (times a margin).
+    omega_hat = np.asarray(w_hat.omega_rad_s)
+    grids, grid_degrees = [], []
+    for rec in problem.recordings:
+        degrees, grid_arrays = None, None
+        if rec.excitation == "decay" and np.size(rec.t) >= 16:
+            grid = _decay_grid(np.asarray(rec.t), np.asarray(rec.y))
+            deg = [_taylor_degree(_TAYLOR_MARGIN * om * grid["dmax"]) for om in omega_hat]
+            if None not in deg:
+                degrees = tuple(deg)
+                grid_arrays = {k: jnp.asarray(v) for k, v in grid.items()}
+        grids.append(grid_arrays)
+        grid_degrees.append(degrees)
+    args = {
+        "problem": problem,
+        "grids": grids,
+        "prior": {
+            k: jnp.asarray([p["a"], p["b"], float(prior_log_norm(p["dist"], p["a"], p["b"]))])
+            for k, p in priors.items()
+        },
+        "nu": jnp.asarray(float(nu)),
+    }
+    model = _Model(
+        n_theta=n_theta,
+        n_rec=n_rec,
+        likelihood=likelihood,
+        marginal=bool(marginalize),
+        priors=tuple((k, p["dist"]) for k, p in priors.items()),
+        grid_degrees=tuple(grid_degrees),
+    )
+    return Problem(
+        model=model,
+        args=args,
+        z0=z0,
+        cov=cov,
+        names=names,
+        priors=priors,
+        observations=obs,
+        record=record,
+        pin=pin,
+        y_std=[float(np.std(o.y)) for o in obs],
+        nu=float(nu),
+    )
+
+
+def _names(theta, n_rec):
+    names = []
+    for path, leaf in jax.tree_util.tree_flatten_with_path(theta)[0]:
+        key = jax.tree_util.keystr(path).replace("['", ".").replace("']", "").lstrip(".")
+        key = key.replace("zeta_u", "logit_zeta")
+        n = int(np.size(leaf))
+        names += [key] if n == 1 else [f"{key}[{i}]" for i in range(n)]
+    return names + [f"log_sigma[{j}]" for j in range(n_rec)]
+
+
+def _laplace(record, obs, static, n_modes, zeta_per_mode, pin, f1_start_hz):
+    """The calibration fit: its problem (recordings weighted by their residual scale), the
+    optimum, its covariance (a small diagonal one where that is not finite) and each
+    recording's residual scale σ_j in normalised units."""
+    cal = calibrate(
+        record,
+        obs,
+        static=static,
+        n_modes=n_modes,
+        zeta_per_mode=zeta_per_mode,
+        pin=pin,
+        f1_start_hz=f1_start_hz,
+    )
+    problem, cov = cal.problem, np.asarray(cal.covariance)
+    if not np.all(np.isfinite(cov)):
+        flat = np.asarray(problem.flatten(cal.optimum))
+        scale = 1e-4 * np.maximum(np.abs(flat), 1e-2)
+        cov = np.diag(scale**2)
+    sig = np.array([1.0 / float(r.weight) for r in problem.recordings])
+    return problem, cal.optimum, cov, sig

@@ -1,0 +1,220 @@
+"""Results of a run: diagnostics from the autocorrelation time, burn-in, thinning, the
+reported quantities' summaries and the record's ``[posterior]`` table."""
+
+import datetime
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..fit import reported_names, sha256_of
+from ..model._record import WhiskerRecord
+from ._likelihood import _unravel
+from ._setup import Problem
+
+
+# --------------------------------------------------------------------------- results
+@dataclass
+class Posterior:
+    """Outcome of :func:`sample_posterior`.
+
+    Attributes:
+        params: Reported quantity → ``median, q16, q84, q2.5, q97.5, mean, std, tau, ess``.
+        diagnostics: ``converged``, ``steps``, ``steps_needed``, ``walkers``, ``burn``,
+            ``thin``, ``acceptance`` (mean), ``acceptance_min``, ``tau`` per sampled
+            coordinate, ``max_tau``, ``log_prob_evals``, ``message``.
+        correlations: ``{"names", "matrix"}`` of the reported quantities.
+        samples: Burnt-in, thinned samples of the reported quantities ``(n, p)``.
+        names: Their names.
+        chain: The full chain in the sampled space ``(steps, walkers, ndim)``.
+        chain_names: Names of the sampled coordinates.
+        record: The record with a ``[posterior]`` table.
+        provenance: Seed, sampler, likelihood, priors, data files with SHA-256, version.
+    """
+
+    params: dict[str, dict]
+    diagnostics: dict[str, Any]
+    correlations: dict[str, Any]
+    samples: np.ndarray
+    names: list[str]
+    chain: np.ndarray = field(repr=False)
+    chain_names: list[str] = field(default_factory=list)
+    record: WhiskerRecord | None = None
+    provenance: dict[str, Any] = field(default_factory=dict)
+    derived_chain: np.ndarray | None = field(default=None, repr=False)
+
+    def to_json(self) -> dict:
+        """The JSON summary (``whiskerid posterior --json``)."""
+        return {
+            "converged": self.diagnostics["converged"],
+            "params": self.params,
+            "tau": self.diagnostics["tau"],
+            "acceptance": self.diagnostics["acceptance"],
+            "ess": {k: v["ess"] for k, v in self.params.items()},
+            "diagnostics": self.diagnostics,
+            "correlations": self.correlations,
+            "provenance": self.provenance,
+        }
+
+
+def derived_quantities(prob: Problem, z: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """Reported quantities (f_1, ζ, κ, EI or C …, σ per recording) at points ``z``."""
+    m = prob.model
+    problem = prob.args["problem"]
+    names = reported_names(problem)
+    vals = np.asarray(
+        _derived_batch(problem, m.marginal, jnp.asarray(np.asarray(z)[:, : m.n_theta]))
+    )
+    sig = np.exp(np.asarray(z)[:, m.n_theta :]) * np.asarray(prob.y_std)
+    names += [f"sigma_{j + 1}" for j in range(m.n_rec)]
+    return np.concatenate([vals, sig], axis=1), names
+
+
+@eqx.filter_jit
+def _derived_batch(problem, marginal, z):
+    unravel = _unravel(problem, marginal)
+    return jax.vmap(lambda v: jnp.stack(list(problem.reported(unravel(v)).values())))(z)
+
+
+def _tau(x: np.ndarray) -> np.ndarray:
+    """Integrated autocorrelation time of a chain ``(steps, walkers, ndim)`` (quiet)."""
+    import logging
+
+    import emcee
+
+    log = logging.getLogger("emcee.autocorr")
+    level = log.level
+    log.setLevel(logging.ERROR)  # the "shorter than 50 tau" verdict is reported by us
+    try:
+        return np.asarray(emcee.autocorr.integrated_time(x, quiet=True), float)
+    except Exception:  # too short for any estimate
+        return np.full(x.shape[2], np.nan)
+    finally:
+        log.setLevel(level)
+
+
+def summarize(prob: Problem, sampler, *, seed: int | None = None) -> Posterior:
+    """Diagnostics, burn-in and thinning from τ, and the summary of the reported quantities."""
+    chain = sampler.get_chain()
+    steps, walkers, ndim = chain.shape
+    tau = _tau(chain)
+    max_tau = float(np.nanmax(tau)) if np.any(np.isfinite(tau)) else float("nan")
+    finite_tau = np.isfinite(max_tau)
+    burn = math.ceil(2 * max_tau) if finite_tau else steps // 2
+    burn = min(burn, steps - 1)
+    min_tau = float(np.nanmin(tau)) if finite_tau else 2.0
+    thin = max(1, int(0.5 * min_tau))
+    needed = math.ceil(50 * max_tau) if finite_tau else None
+    converged = bool(finite_tau and steps >= needed)
+    acc = np.asarray(sampler.acceptance_fraction)
+    derived_full, names = derived_quantities(prob, chain.reshape(-1, ndim))
+    derived_full = derived_full.reshape(steps, walkers, -1)
+    tau_d = _tau(derived_full)
+    kept = derived_full[burn::thin].reshape(-1, derived_full.shape[2])
+    params = {}
+    for i, name in enumerate(names):
+        x = kept[:, i]
+        q = np.percentile(x, [2.5, 16, 50, 84, 97.5])
+        t_i = float(tau_d[i])
+        ess = walkers * (steps - burn) / t_i if np.isfinite(t_i) and t_i > 0 else float("nan")
+        params[name] = {
+            "median": float(q[2]),
+            "q16": float(q[1]),
+            "q84": float(q[3]),
+            "q2.5": float(q[0]),
+            "q97.5": float(q[4]),
+            "mean": float(np.mean(x)),
+            "std": float(np.std(x)),
+            "tau": t_i,
+            "ess": float(ess),
+        }
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = np.corrcoef(kept.T) if kept.shape[0] > 2 else np.eye(len(names))
+    if not finite_tau:
+        msg = f"not converged: {steps} steps are too few for any estimate of tau"
+    elif converged:
+        msg = f"converged: {steps} steps >= 50 max tau = {needed}"
+    else:
+        msg = (
+            f"not converged: {steps} steps < 50 max tau = {needed}; run at least {needed} "
+            f"steps (e.g. resume with {needed - steps} more)"
+        )
+    diagnostics = {
+        "converged": converged,
+        "message": msg,
+        "steps": int(steps),
+        "steps_needed": needed,
+        "walkers": int(walkers),
+        "burn": int(burn),
+        "thin": int(thin),
+        "n_samples": int(kept.shape[0]),
+        "acceptance": float(np.mean(acc)),
+        "acceptance_min": float(np.min(acc)),
+        "tau": {n: float(t) for n, t in zip(prob.names, tau, strict=True)},
+        "max_tau": max_tau,
+        "log_prob_evals": int(steps * walkers),
+    }
+    provenance = _provenance(prob, walkers, seed, getattr(sampler, "whiskerid_move", None))
+    post = Posterior(
+        params=params,
+        diagnostics=diagnostics,
+        correlations={"names": names, "matrix": np.round(np.nan_to_num(corr), 6).tolist()},
+        samples=kept,
+        names=names,
+        chain=chain,
+        chain_names=list(prob.names),
+        provenance=provenance,
+        derived_chain=derived_full,
+    )
+    post.record = _updated_record(prob.record, post)
+    return post
+
+
+def _provenance(prob, walkers, seed, move):
+    import emcee
+
+    from .._version import __version__
+
+    files = []
+    for o in prob.observations:
+        if o.source and Path(o.source).exists():
+            files.append({"path": str(o.source), "sha256": sha256_of(o.source), "name": o.name})
+    return {
+        "sampler": f"emcee {emcee.__version__} EnsembleSampler (vectorize=True)",
+        "move": move or "unknown",
+        "seed": -1 if seed is None else int(seed),
+        "walkers": int(walkers),
+        "likelihood": prob.model.likelihood,
+        "nu": prob.nu if prob.model.likelihood == "student" else 0.0,
+        "linear_nuisances": "marginalised analytically (flat prior)"
+        if prob.model.marginal
+        else "sampled (flat prior)",
+        "noise": "unknown sigma per recording, sampled as log sigma",
+        "n_modes": prob.args["problem"].n_modes,
+        "pin": prob.pin,
+        "priors": prob.priors,
+        "start": "Laplace approximation of the calibration fit",
+        "data_files": files,
+        "whiskerid_version": __version__,
+        "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
+    }
+
+
+def _updated_record(record: WhiskerRecord, post: Posterior) -> WhiskerRecord:
+    d = post.diagnostics
+    table = {
+        "converged": d["converged"],
+        "message": d["message"],
+        "params": post.params,
+        "diagnostics": {k: v for k, v in d.items() if v is not None},
+        "correlations": post.correlations,
+        "provenance": post.provenance,
+    }
+    extra = dict(record.extra)
+    extra["posterior"] = table
+    return record.replace(extra=extra)
