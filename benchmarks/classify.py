@@ -29,7 +29,7 @@ def main() -> None:
     recs = wi.synthesize_runs(specs, duration_s=51.0)  # 6 runs × 50 windows = 300 per terrain
     import tempfile
 
-    from whiskerid.io._recording import write_csv
+    from whiskerid.io import write_csv
 
     with tempfile.TemporaryDirectory() as tmp:
         for s, r in zip(specs, recs, strict=True):

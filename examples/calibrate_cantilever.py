@@ -70,7 +70,7 @@ def main(argv=None) -> int:
     if not args.data.exists():
         print(f"no data at {args.data}", file=sys.stderr)
         return 2
-    from whiskerid.plot._calibrate import plot_calibration
+    from whiskerid.plot import plot_calibration
 
     summary = {}
     for length_cm in (30, 50):

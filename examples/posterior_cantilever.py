@@ -97,7 +97,7 @@ def main(argv=None) -> int:
     if not args.data.exists():
         print(f"no data at {args.data}", file=sys.stderr)
         return 2
-    from whiskerid.plot._posterior import plot_corner, plot_trace
+    from whiskerid.plot import plot_corner, plot_trace
 
     args.out.mkdir(parents=True, exist_ok=True)
     out = {"settings": {k: str(v) for k, v in vars(args).items()}, "lengths": {}}

@@ -10,8 +10,7 @@ import pytest
 from helpers import ALU
 
 import whiskerid as wi
-from whiskerid.fit import GTOL, release_time
-from whiskerid.fit._lsq import gradient_cosine
+from whiskerid.fit import GTOL, gradient_cosine, release_time
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "cantilever"
 

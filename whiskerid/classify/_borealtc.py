@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io._recording import RecordingError
+from ..io import RecordingError
 from ._dataset import WindowSet, cut_windows
 
 DEFAULT_ROOT = Path(__file__).resolve().parents[3] / "shared" / "data" / "borealtc"

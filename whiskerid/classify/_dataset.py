@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io._recording import Recording, RecordingError, check_samples, read_recording
+from ..io import Recording, RecordingError, check_samples, read_recording
 
 RECORDING_SUFFIXES = (".csv", ".npz", ".npy")
 #: Fewest samples a window may hold: a spectrum of fewer bins says nothing of a terrain.

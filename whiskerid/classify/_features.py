@@ -53,7 +53,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._choices import FEATURE_KINDS
-from ..fit._lsq import least_squares, to_interval
+from ..fit import least_squares, to_interval
 
 FeatureKind = Literal["fitted", "paper"]
 _EPS = 1e-12

@@ -28,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._version import __version__
-from ..io._recording import Recording, RecordingError
+from ..io import Recording, RecordingError
 from ._context import check_context, fuse_context
 from ._dataset import (
     check_rate,

@@ -192,7 +192,7 @@ def _cmd_calibrate(args, command_error) -> dict:
     print(f"wrote {args.out}", file=sys.stderr)
     out = {**cal.to_json(), "out": str(args.out)}
     if args.plot:
-        from ..plot._calibrate import plot_calibration
+        from ..plot import plot_calibration
 
         plot_calibration(args.plot, cal)
         out["plot"] = str(args.plot)

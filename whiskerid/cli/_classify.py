@@ -26,7 +26,7 @@ def add_parser(sub) -> None:
 
 def run(args) -> dict:
     """Label the recording (and plot its labels); returns the JSON summary."""
-    from ..io._recording import check_out_path, read_recording
+    from ..io import check_out_path, read_recording
 
     if args.plot is not None:  # before any work
         check_out_path(args.plot, "--plot", inputs={"MODEL": args.model, "REC": args.recording})

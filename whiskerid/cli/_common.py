@@ -37,7 +37,7 @@ def say(*parts) -> None:
 
 def record_or_paper(path: Path | None):
     """The whisker record at ``path`` (TOML), or the paper's whisker when ``path`` is None."""
-    from ..model._record import load_record, paper_record
+    from ..model import load_record, paper_record
 
     return paper_record() if path is None else load_record(path)
 

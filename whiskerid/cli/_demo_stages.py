@@ -18,12 +18,9 @@ from pathlib import Path
 import jax.numpy as jnp
 import numpy as np
 
-from ..fit._signal import dominant_peaks
-from ..io._recording import write_csv
-from ..model._paper import paper_eq1
-from ..model._record import paper_record
-from ..model._response import harmonic_steady_state, observe
-from ..model._simulate import simulate
+from ..fit import dominant_peaks
+from ..io import write_csv
+from ..model import harmonic_steady_state, observe, paper_eq1, paper_record, simulate
 
 MODAL_CASES = [(hb, fb) for fb in (100.0, 300.0) for hb in (1e-4, 3e-4)]
 
@@ -118,7 +115,7 @@ def _calibration_stage(out: Path, record, *, plots: bool, say) -> dict:
     """Simulate a pluck as the Pi records it and calibrate the whisker from it (f_1, ζ, EI)."""
     from dataclasses import replace
 
-    from ..fit._calibrate import Observation, calibrate
+    from ..fit import Observation, calibrate
 
     say("[4] calibration: a pluck recorded by the ADS1115 at 200 Hz (10 s, SNR 30 dB), fitted")
     say("    from a nominal record 30 % off (start values from the data)")
@@ -154,7 +151,7 @@ def _calibration_stage(out: Path, record, *, plots: bool, say) -> dict:
         **{k: {"value": v["value"], "std": v["std"]} for k, v in p.items()},
     }
     if plots:
-        from ..plot._calibrate import plot_calibration
+        from ..plot import plot_calibration
 
         summary["png"] = str(plot_calibration(out / "calibration.png", cal))
     return summary, (cal.record, obs)
@@ -188,7 +185,7 @@ def _posterior_stage(out: Path, record, obs, *, plots: bool, say) -> dict:
         "record": str(path),
     }
     if plots:
-        from ..plot._posterior import plot_corner, plot_trace
+        from ..plot import plot_corner, plot_trace
 
         summary["corner_png"] = str(plot_corner(out / "posterior_corner.png", post))
         summary["trace_png"] = str(plot_trace(out / "posterior_trace.png", post))

@@ -32,7 +32,7 @@ def run(args) -> dict:
     """Score the model and print its confusion matrix; returns the JSON summary."""
     from ..classify import evaluate_classifier as evaluate
     from ..classify import format_confusion, load_dataset
-    from ..io._recording import check_out_path
+    from ..io import check_out_path
     from ..plot import plot_confusion
 
     if args.plot is not None:  # before any work

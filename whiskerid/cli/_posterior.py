@@ -112,7 +112,7 @@ def _cmd_posterior(args, command_error) -> dict:
     print(f"acceptance {d['acceptance']:.3f}; {d['message']}", file=sys.stderr)
     out = {**post.to_json(), "out": str(out_toml), "chain": str(chain)}
     if not args.no_plots:
-        from ..plot._posterior import plot_corner, plot_trace
+        from ..plot import plot_corner, plot_trace
 
         out["corner"] = str(plot_corner(args.out / "corner.png", post))
         out["trace"] = str(plot_trace(args.out / "trace.png", post))

@@ -79,8 +79,8 @@ def run(args) -> dict:
     """Simulate, write the CSV (and the plot); returns the JSON summary."""
     import numpy as np
 
-    from ..io._recording import check_out_path, write_csv
-    from ..model._simulate import simulate
+    from ..io import check_out_path, write_csv
+    from ..model import simulate
 
     inputs = {"--whisker": args.whisker, "--base": args.base}
     check_out_path(args.out, "--out", inputs=inputs)
@@ -136,8 +136,8 @@ def run(args) -> dict:
 
 def _read_base_motion(path: Path, column: str | None):
     from ..classify import recording_rate
-    from ..io._recording import check_samples, read_recording
-    from ..model._simulate import BaseMotion
+    from ..io import check_samples, read_recording
+    from ..model import BaseMotion
 
     rec = read_recording(path)
     acc = rec.signal(column)
@@ -147,6 +147,6 @@ def _read_base_motion(path: Path, column: str | None):
 
 
 def _peaks(t, x, n: int = 3) -> list[float]:
-    from ..fit._signal import dominant_peaks
+    from ..fit import dominant_peaks
 
     return [round(p.frequency_hz, 3) for p in dominant_peaks(t, x, n=n)]

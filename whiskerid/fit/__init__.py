@@ -21,6 +21,8 @@ from ._lsq import FitResult as FitResult
 from ._lsq import cho_solve_small as cho_solve_small
 from ._lsq import cholesky_small as cholesky_small
 from ._lsq import from_interval as from_interval
+from ._lsq import gradient_cosine as gradient_cosine
+from ._lsq import least_squares as least_squares
 from ._lsq import to_interval as to_interval
 from ._observation import G0 as G0
 from ._observation import CalibrationError as CalibrationError

@@ -43,8 +43,7 @@ import numpy as np
 
 from .._choices import PINS
 from .._version import __version__
-from ..model._record import WhiskerRecord
-from ..model._whisker import UniformBeam
+from ..model import UniformBeam, WhiskerRecord
 from ._observation import CalibrationError, Observation, StaticTest, sha256_of
 from ._problem import (
     FitProblem,

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from .._choices import EXCITATIONS, OBSERVABLES
-from ..io._recording import Recording, RecordingError, check_samples
-from ..model._record import WhiskerRecord
+from ..io import Recording, RecordingError, check_samples
+from ..model import WhiskerRecord
 
 G0 = 9.80665  # m/s² per g
 
@@ -122,7 +122,7 @@ class StaticTest:
 
 def read_static_test(path: str | Path) -> StaticTest:
     """Read a static test CSV with columns ``force_n`` and ``deflection_m`` (optional ``x_m``)."""
-    from ..io._recording import read_csv_table
+    from ..io import read_csv_table
 
     path = Path(path)
     if not path.exists():

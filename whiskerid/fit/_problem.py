@@ -29,10 +29,15 @@ from jax.flatten_util import ravel_pytree
 from jaxtyping import Array
 
 from .._choices import PINS
-from ..model._modes import _roots_np
-from ..model._record import WhiskerRecord
-from ..model._response import base_motion_response, harmonic_steady_state, observe
-from ..model._whisker import CoilSpring, Whisker
+from ..model import (
+    CoilSpring,
+    Whisker,
+    WhiskerRecord,
+    base_motion_response,
+    cantilever_roots,
+    harmonic_steady_state,
+    observe,
+)
 from . import _lsq as _lsq
 from ._decay import decay_rates, free_decay_columns
 from ._observation import CalibrationError, Observation, StaticTest, nominal_gain
@@ -157,7 +162,7 @@ class FitProblem(eqx.Module):
         coil = isinstance(structure, CoilSpring)
         roots = None
         if static is None:
-            roots = jnp.asarray(_roots_np(float(nominal.mu), int(n_modes)))
+            roots = cantilever_roots(float(nominal.mu), int(n_modes))
         f64 = lambda x: jnp.asarray(float(x))  # noqa: E731
         return cls(
             recordings=tuple(recs),

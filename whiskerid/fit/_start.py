@@ -9,7 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..model._whisker import Whisker
+from ..model import Whisker
 from . import _lsq as _lsq
 from ._observation import Observation
 from ._problem import ZETA_MAX, FitProblem, recording_design

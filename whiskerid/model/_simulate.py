@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._choices import EXCITATIONS, MODELS, OBSERVABLES, UNITS
-from ..io._recording import Recording
+from ..io import Recording
 from ._paper import paper_eq1
 from ._record import WhiskerRecord
 from ._response import (

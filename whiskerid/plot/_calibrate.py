@@ -4,7 +4,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..fit._signal import amplitude_spectrum, resample_uniform
+from ..fit import amplitude_spectrum, resample_uniform
 from ._plot import _pyplot, _save
 
 

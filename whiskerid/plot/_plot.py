@@ -4,7 +4,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..fit._signal import amplitude_spectrum, find_peaks, resample_uniform
+from ..fit import amplitude_spectrum, find_peaks, resample_uniform
 
 
 def _pyplot():

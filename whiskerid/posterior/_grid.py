@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..fit import conversion_average, decay_rates
-from ..model._trig import sincos
+from ._trig import sincos
 
 # direct columns' own rounding, from the argument ω t, is ~|ω t| · 1e-16, larger).
 _TAYLOR_TOL = 1e-15

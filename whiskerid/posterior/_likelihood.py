@@ -20,9 +20,9 @@ from ..fit import (
     recording_design,
     to_interval,
 )
-from ..model._trig import sincos
 from ._grid import _decay_tables, _grid_columns, _taylor_radius
 from ._prior import prior_logpdf
+from ._trig import sincos
 
 
 # --------------------------------------------------------------------------- model

@@ -6,7 +6,7 @@ import numpy as np
 
 from .._choices import MOVES
 from ..fit import Observation
-from ..model._record import WhiskerRecord
+from ..model import WhiskerRecord
 from ._prior import PosteriorError
 from ._setup import Problem, setup_posterior
 from ._summary import Posterior, summarize

@@ -10,7 +10,7 @@ from jax.flatten_util import ravel_pytree
 
 from .._choices import LIKELIHOODS
 from ..fit import Observation, calibrate
-from ..model._record import WhiskerRecord
+from ..model import WhiskerRecord
 from ._grid import _TAYLOR_MARGIN, _decay_grid, _taylor_degree
 from ._likelihood import _batch_fn, _drop_c, _Model, _pack
 from ._prior import PosteriorError, default_prior, parse_prior, prior_log_norm

@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..fit import reported_names, sha256_of
-from ..model._record import WhiskerRecord
+from ..model import WhiskerRecord
 from ._likelihood import _unravel
 from ._setup import Problem
 
