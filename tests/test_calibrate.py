@@ -122,6 +122,7 @@ def test_static_test_pins_EI_so_C_follows(paper):
     assert abs(p["C"]["value"] - 6.207) < 4 * p["C"]["std"]
 
 
+@pytest.mark.slow
 def test_nonuniform_timestamps(paper):
     rec, f1, zeta = paper
     obs = _pluck(rec, "adc", rate_hz=200, duration_s=5, noise_db=30, seed=7, jitter_s=1e-3,

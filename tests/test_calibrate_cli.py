@@ -22,6 +22,7 @@ def _csv(path, t, y, col="deflection", extra=""):
     return path
 
 
+@pytest.mark.slow
 def test_simulate_then_calibrate_recovers_the_simulated_whisker(tmp_path, capsys):
     sim = tmp_path / "sim.csv"
     assert main(["simulate", "--whisker", PAPER, "--model", "exact", "--excitation", "decay",

@@ -67,6 +67,7 @@ def test_calibrating_other_whiskers_compiles_nothing_new():
         assert cal.ok and cal.params["f1_hz"]["value"] == pytest.approx(truth, rel=2e-3)
 
 
+@pytest.mark.slow
 def test_posterior_log_density_of_other_whiskers_compiles_nothing_new():
     counts = []
     for length, r_w, r_c, n, x_s, _, tip in WHISKERS[:2]:

@@ -97,6 +97,7 @@ def test_base_motion_scan_equals_closed_form_for_a_sine():
         assert float(jnp.max(jnp.abs(a - b))) < 2e-3 * float(jnp.max(jnp.abs(b)))
 
 
+@pytest.mark.slow
 def test_base_motion_non_uniform_steps_match_direct_integration():
     w = wi.paper_whisker(8)
     fem = FEMBeam(length=0.06, EI=float(w.EI), rho_a=float(w.rho_a), zeta=0.04, n_el=16)

@@ -49,7 +49,16 @@ def _paper(p):
     return wi.paper_eq1(_whisker(p), T, fb_hz=100.0, hb_m=p[3] * 1e-4) * 1e6
 
 
-@pytest.mark.parametrize("fn", [_steady, _from_rest, _base, _decay, _paper])
+@pytest.mark.parametrize(
+    "fn",
+    [
+        _steady,
+        pytest.param(_from_rest, marks=pytest.mark.slow),
+        pytest.param(_base, marks=pytest.mark.slow),
+        _decay,
+        _paper,
+    ],
+)
 def test_check_grads(fn):
     p = jnp.array([1.0, 0.04, 1.0, 1.0])
     check_grads(jax.jit(fn), (p,), order=1, modes=("fwd", "rev"), eps=1e-6, atol=1e-5, rtol=1e-5)

@@ -271,6 +271,7 @@ def test_coverage_small():
     assert 0.7 <= hits90 / n <= 1.0
 
 
+@pytest.mark.slow
 def test_static_test_pins_ei():
     """A static test (tip force vs deflection) in the log-probability pins EI: the posterior
     of EI covers the truth and its width is the static fit's own uncertainty."""

@@ -91,9 +91,9 @@ def test_grid_columns_equal_direct_columns(modes, offsets, n):
         ({"marginalize": False}, 1),
         ({}, 1),
         ({"likelihood": "student"}, 1),
-        ({"marginalize": False}, 3),
+        pytest.param({"marginalize": False}, 3, marks=pytest.mark.slow),
         ({}, 3),
-        ({"adc": True}, 1),
+        pytest.param({"adc": True}, 1, marks=pytest.mark.slow),
         ({"wander": 2e-3}, 1),
     ],
 )
@@ -141,6 +141,7 @@ def test_batch_falls_back_to_direct_columns():
     np.testing.assert_allclose(prob.log_prob(z), _direct(prob, z), rtol=1e-12, atol=0)
 
 
+@pytest.mark.slow
 def test_no_grid_for_irregular_timestamps():
     """A dropped sample makes the offsets in its row of the grid half a step; three modes
     then need more than the maximum Taylor degree and the recording is evaluated directly."""
@@ -177,7 +178,7 @@ def test_packed_arguments_round_trip():
         np.testing.assert_array_equal(x, y)
 
 
-@pytest.mark.parametrize("marginal", [True, False])
+@pytest.mark.parametrize("marginal", [pytest.param(True, marks=pytest.mark.slow), False])
 def test_log_prob_gradients_direct_and_gridded(marginal):
     """The log-density is differentiable on both paths, forward and reverse (NUTS needs
     reverse mode; the marginal model's one variadic reduction has a JVP of its own), and
