@@ -4,8 +4,11 @@ Nothing here imports whiskerid's model code: these are separate transcriptions (
 a separate discretisation (finite elements), so agreement means something.
 """
 
+import jax.numpy as jnp
 import numpy as np
 import scipy.linalg
+
+from whiskerid.fit import RecordingModel
 
 #: The paper whisker's derived values and natural frequencies (from its Section III geometry).
 PAPER_EI = 3.436e-3
@@ -195,3 +198,14 @@ class FEMBeam:
         )
         assert sol.success, sol.message
         return sol.y[:n_modes].T @ phi.T
+
+
+def decay_recording(t, modes, offsets=None):
+    """A free decay's recording model at times ``t`` (data zero), as the fit builds it."""
+    t = jnp.asarray(t)
+    return RecordingModel(
+        t=t, y=jnp.zeros_like(t), weight=jnp.asarray(1.0), scale=jnp.asarray(1.0),
+        hb_m=jnp.asarray(1e-3), x_m=jnp.asarray(0.005), fb_hz=jnp.asarray(0.0),
+        avg_offsets=None if offsets is None else jnp.asarray(offsets), base_acc=None,
+        excitation="decay", observable="deflection", forced="none", n_cols=2 + 2 * modes,
+    )  # fmt: skip

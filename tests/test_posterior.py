@@ -4,13 +4,13 @@ HDF5 resume, CLI round trip, and (slow) interval coverage."""
 import json
 import math
 
-import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import decay_recording
 
 import whiskerid as wi
 from whiskerid import posterior as P
-from whiskerid.fit import RecordingModel, recording_design
+from whiskerid.fit import recording_design
 from whiskerid.posterior import _likelihood as L
 
 F1, ZETA, NOISE, N = 48.0, 0.02, 0.05, 500
@@ -24,17 +24,6 @@ def decay(seed=0, n=N, f1=F1, zeta=ZETA, noise=NOISE):
     phase = rng.uniform(0, 2 * np.pi)
     y = 0.3 + np.exp(-zeta * w * t) * np.cos(w * math.sqrt(1 - zeta**2) * t + phase)
     return wi.Observation(t, y + noise * rng.standard_normal(n), name=f"decay-{seed}")
-
-
-def decay_recording(t, modes, offsets=None):
-    """A free decay's recording model at times ``t`` (data zero), as the fit builds it."""
-    t = jnp.asarray(t)
-    return RecordingModel(
-        t=t, y=jnp.zeros_like(t), weight=jnp.asarray(1.0), scale=jnp.asarray(1.0),
-        hb_m=jnp.asarray(1e-3), x_m=jnp.asarray(0.005), fb_hz=jnp.asarray(0.0),
-        avg_offsets=None if offsets is None else jnp.asarray(offsets), base_acc=None,
-        excitation="decay", observable="deflection", forced="none", n_cols=2 + 2 * modes,
-    )  # fmt: skip
 
 
 @pytest.fixture(scope="module")

@@ -9,10 +9,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import decay_recording
 
 import whiskerid as wi
 from whiskerid import posterior as P
-from whiskerid.fit import RecordingModel
 from whiskerid.posterior import _grid as G
 from whiskerid.posterior import _likelihood as L
 
@@ -32,17 +32,6 @@ def decay(seed=0, n=N, jitter=2e-4, drop=None, wander=0.0):
     if drop is not None:
         keep[list(drop)] = False
     return wi.Observation(t[keep], y[keep], name=f"decay-{seed}")
-
-
-def _recording(t, modes, offsets=None):
-    """A free decay's recording model at times ``t`` (data zero), as the fit builds it."""
-    t = jnp.asarray(t)
-    return RecordingModel(
-        t=t, y=jnp.zeros_like(t), weight=jnp.asarray(1.0), scale=jnp.asarray(1.0),
-        hb_m=jnp.asarray(1e-3), x_m=jnp.asarray(0.005), fb_hz=jnp.asarray(0.0),
-        avg_offsets=None if offsets is None else jnp.asarray(offsets), base_acc=None,
-        excitation="decay", observable="deflection", forced="none", n_cols=2 + 2 * modes,
-    )  # fmt: skip
 
 
 def _direct(prob, z):
@@ -68,7 +57,7 @@ def test_grid_columns_equal_direct_columns(modes, offsets, n):
     omega = np.asarray(w.omega_rad_s)
     degrees = tuple(G._taylor_degree(o * grid["dmax"]) for o in omega)
     gj = {k: jnp.asarray(v) for k, v in grid.items()}
-    rec = _recording(t, modes, offsets)
+    rec = decay_recording(t, modes, offsets)
     cols = G._grid_columns(G._decay_tables(rec, w, gj), gj, degrees)
     direct, _ = L._columns(rec, w, {})
     mask = grid["mask"].ravel()
