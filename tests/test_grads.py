@@ -65,7 +65,7 @@ def test_check_grads(fn):
 
 
 def test_only_kappa_matters_without_tip_mass():
-    """NOTES §3: scaling EI and C together leaves the response unchanged (identifiability)."""
+    """Scaling EI and C together leaves the response unchanged (identifiability)."""
     a = _steady(jnp.array([1.0, 0.04, 1.0, 1.0]))
     b = _steady(jnp.array([2.0, 0.04, 2.0, 1.0]))
     assert float(jnp.max(jnp.abs(a - b))) < 1e-9 * float(jnp.max(jnp.abs(a)))

@@ -29,7 +29,7 @@ def test_long_records_stay_finite():
 
 @pytest.mark.parametrize("fb", [100.0, 300.0])
 def test_modal_analysis_figure_peaks(fb):
-    """Dominant peak at f_b for h_b = 0.1 and 0.3 mm; side peaks at f_b ± f_d1 (NOTES §2)."""
+    """Dominant peak at f_b for h_b = 0.1 and 0.3 mm; side peaks at f_b ± f_d1."""
     w = wi.paper_whisker()
     fd1 = float(w.damped_frequencies_hz[0])
     t = np.arange(20_000) / 20_000.0
@@ -53,7 +53,7 @@ def test_notes_example_peaks_at_54_100_146():
 
 
 def test_no_resonance_at_f1_unlike_a_linear_beam():
-    """Eq. 1 tends to a quasi-static term: driving at f_1 is not amplified (NOTES §2)."""
+    """Eq. 1 tends to a quasi-static term: driving at f_1 is not amplified."""
     w = wi.paper_whisker()
     t = jnp.arange(0, 4.0, 1 / 20_000)
     late = t > 3.0

@@ -59,7 +59,7 @@ def test_impossible_settings_are_refused(kwargs, message):
 
 
 def test_simulated_adc_recording_sees_f1_and_the_alias_of_f2():
-    """NOTES §4: at 200 Hz, f_1 = 46 Hz is seen directly and f_2 = 288 Hz folds to 88 Hz."""
+    """At 200 Hz, f_1 = 46 Hz is seen directly and f_2 = 288 Hz folds to 88 Hz."""
     rec = wi.paper_record()
     sim = wi.simulate(
         rec,

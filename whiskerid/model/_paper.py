@@ -12,7 +12,7 @@ Whisker Sensor for Terrain Identification by Mobile Robots").
     𝒟 = D_i⁴ EI sqrt(1−ζ²) (3 sinh D cos²D cosh D − D cos²D − 3 sin D cos D cosh²D
         + 3 sinh D cos D + D cosh²D − 3 sin D cosh D + 2 D sin D sinh D)
 
-Read closely (NOTES §2), each mode contributes ``sin(ω_b t)`` times a damped step response of
+Read closely, each mode contributes ``sin(ω_b t)`` times a damped step response of
 that mode, so the spectrum has a peak at ``f_b`` flanked by peaks at ``f_b ± f_d,i``, and
 there is no resonance at ``f_b = f_i``. This module keeps the formula as printed and is the
 ``paper`` model; :mod:`whiskerid._response` is the exact modal model.

@@ -241,7 +241,7 @@ def _check_record(rec: WhiskerRecord) -> None:
 
 
 def paper_record() -> WhiskerRecord:
-    """The paper's whisker as a record (NOTES §1); ``fits/paper-whisker.toml`` holds it."""
+    """The paper's whisker as a record (its Section III); ``fits/paper-whisker.toml`` holds it."""
     from ._whisker import paper_coil
 
     return WhiskerRecord(

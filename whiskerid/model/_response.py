@@ -4,7 +4,8 @@ The relative deflection (beam minus base) is ``w(x, t) = Σ_i φ_i(x) q_i(t)`` w
 
     q̈_i + 2 ζ_i ω_i q̇_i + ω_i² q_i = −Γ_i ÿ_b(t)
 
-(NOTES §2). Everything here is float64-ready and works under ``jit``, ``vmap`` and ``grad``.
+(a linear beam resonates at ``f_i``; the paper's Eq. 1 as printed does not). Everything here is
+float64-ready and works under ``jit``, ``vmap`` and ``grad``.
 Three forms are provided:
 
 * :func:`harmonic_steady_state` and :func:`harmonic_from_rest` for ``y_b = h_b sin(ω_b t)``

@@ -1,6 +1,6 @@
 """Simulate what a whisker records: model × excitation × observable, sampled like a Pi.
 
-This is the engine behind ``whiskerid simulate`` (NOTES §7). Models:
+This is the engine behind ``whiskerid simulate``. Models:
 
 * ``paper``: Eq. 1 as printed (sine excitation only);
 * ``steady``: the exact modal model's harmonic steady state (sine only);

@@ -3,7 +3,7 @@
 Two structures are supported:
 
 * :class:`CoilSpring`, the paper's whisker, modelled as an equivalent cantilever beam
-  (NOTES §1): wire area ``a = π r_w²``, bending stiffness ``EI := G_w J_w`` with
+  (its Section III): wire area ``a = π r_w²``, bending stiffness ``EI := G_w J_w`` with
   ``J_w = π r_w⁴/4``, pitch ``p = l/n``, wire length ``l_w = n sqrt((2πr)² + p²)``,
   coil correction ``C = l_w/(n p)`` and line density ``ρa = C ρ_w a``.
 * :class:`UniformBeam`, a plain prismatic beam with a rectangular or circular section:
@@ -299,7 +299,7 @@ def whisker_from_structure(
 
 
 def paper_coil() -> CoilSpring:
-    """The paper's spring (NOTES §1): 60 mm, r_w 0.5 mm, r 4.5 mm, 13 coils, steel."""
+    """The paper's spring (its Section III): 60 mm, r_w 0.5 mm, r 4.5 mm, 13 coils, steel."""
     return CoilSpring(
         length_m=0.060,
         wire_radius_m=0.0005,
