@@ -1,11 +1,28 @@
-"""Test configuration: float64 everywhere (the models need it), compiled code freed per module."""
+"""Test configuration: float64 everywhere (the models need it), compiled code freed per module.
+
+JAX's persistent compilation cache points at a folder made for this run (removed at its end):
+a module whose compiled code was freed loads what an earlier module compiled instead of
+compiling it again. Nothing is kept between runs, so every run is a cold start.
+"""
 
 import gc
+import shutil
+import tempfile
 
 import jax
 import pytest
 
 jax.config.update("jax_enable_x64", True)
+
+_CACHE = tempfile.mkdtemp(prefix="whiskerid-test-jax-cache-")
+jax.config.update("jax_compilation_cache_dir", _CACHE)
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+
+
+def pytest_sessionfinish(session, exitstatus):
+    """Remove this run's compilation cache."""
+    shutil.rmtree(_CACHE, ignore_errors=True)
 
 
 @pytest.fixture(autouse=True, scope="module")
@@ -13,7 +30,7 @@ def _free_compiled_code():
     """Drop JAX's compiled executables after each test module.
 
     Every module compiles its own problem shapes; kept for the whole session they add up to
-    gigabytes, while a later module rarely reuses them.
+    gigabytes, while a later module rarely reuses them (and then finds them in the cache above).
     """
     yield
     jax.clear_caches()
