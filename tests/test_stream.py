@@ -248,6 +248,12 @@ def test_stream_cli_refuses_bad_input(tiny_model, tmp_path, capsys):
     assert "not a terrain of this model" in capsys.readouterr().err
     assert main(["stream", "--model", str(tmp_path), "--simulate", "brick"]) == 2
     assert main(["stream", "--model", str(tiny_model), "--i2c-bus", "1", "--fast"]) == 2
+    # A rate below the model's is refused at the start, in words (it used to stream for the
+    # whole --duration without a label and then fail on the summary).
+    args = ["stream", "--model", str(tiny_model), "--simulate", "brick", "--fast"]
+    assert main([*args, "--duration", "20", "--rate", "100"]) == 2
+    err = capsys.readouterr().err
+    assert "--rate 100 Hz is below the 200 Hz this model was trained at" in err
 
 
 _STREAM_TO_DISK = """

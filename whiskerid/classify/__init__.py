@@ -12,6 +12,7 @@ cross-validation, the paper's protocol) and ``_borealtc`` (a public IMU dataset)
 from .. import _jax_setup as _jax_setup
 from ._borealtc import load_borealtc as load_borealtc
 from ._context import fuse_context as fuse_context
+from ._dataset import RATE_TOLERANCE as RATE_TOLERANCE
 from ._dataset import WindowSet as WindowSet
 from ._dataset import load_dataset as load_dataset
 from ._dataset import recording_rate as recording_rate

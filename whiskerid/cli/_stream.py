@@ -64,7 +64,7 @@ def add_parser(sub) -> None:
 def run(args) -> dict:
     """Stream until --duration, Ctrl-C or SIGTERM; returns the JSON summary."""
     from .. import hw
-    from ..classify import ClassifierModel
+    from ..classify import RATE_TOLERANCE, ClassifierModel
     from ..hw import OnlineClassifier, open_recorder, run_stream, terrain_source
 
     _check_numbers(args)
@@ -74,6 +74,14 @@ def run(args) -> dict:
     if args.simulate is not None and args.simulate not in model.labels:
         raise CommandError(f"--simulate {args.simulate!r} is not a terrain of this model; "
                             f"its labels are {', '.join(model.labels)}")  # fmt: skip
+    if args.rate < model.rate_hz * (1 - RATE_TOLERANCE):
+        # Resampling up cannot add what lies between the two Nyquist limits: every window
+        # would be refused or misread, so refuse before sampling starts.
+        raise CommandError(
+            f"--rate {args.rate:g} Hz is below the {model.rate_hz:g} Hz this model was trained "
+            f"at: stream at {model.rate_hz:g} Hz or more, or train a model at {args.rate:g} Hz "
+            "(whiskerid train --rate)"
+        )
     clock = hw.FakeClock() if args.fast else None
     timing = {} if clock is None else {"clock": clock.now_ns, "sleep": clock.sleep}
     if args.simulate is not None:
