@@ -155,3 +155,15 @@ def test_demo_runs_end_to_end(tmp_path, capsys):
         assert (tmp_path / name).stat().st_size > 1_000
     cls = summary["classification"]  # stage 6: 7 terrains, held-out recordings (measured 0.96)
     assert cls["accuracy"] > 0.85 and cls["accuracy_per_recording"] > 0.85
+
+
+def test_posterior_intervals_print_digits_that_tell_the_bounds_apart():
+    from whiskerid.cli._posterior import interval_text
+
+    narrow = {"median": 16.32812, "q16": 16.32801, "q84": 16.32823, "q2.5": 16.3279,
+              "q97.5": 16.3284}  # fmt: skip
+    text = interval_text(narrow)
+    lo, hi = text.split("68%: ")[1].split(";")[0].split(" .. ")
+    assert lo != hi and float(lo) < float(hi), text
+    wide = {"median": 0.04, "q16": 0.039, "q84": 0.041, "q2.5": 0.038, "q97.5": 0.042}
+    assert interval_text(wide).startswith("0.04 (68%: 0.039 .. 0.041;")

@@ -1,5 +1,6 @@
 """``whiskerid posterior``: emcee posteriors of ζ, f_1, κ (EI or C) from recordings."""
 
+import math
 import sys
 from pathlib import Path
 
@@ -103,12 +104,8 @@ def _cmd_posterior(args, command_error) -> dict:
     for name in ("f1_hz", "zeta", "kappa", "EI", "C"):
         if name in post.params:
             q = post.params[name]
-            print(
-                f"{name} = {q['median']:.5g} (68%: {q['q16']:.5g} .. {q['q84']:.5g}; "
-                f"95%: {q['q2.5']:.5g} .. {q['q97.5']:.5g}), tau {q['tau']:.3g}, "
-                f"ESS {q['ess']:.4g}",
-                file=sys.stderr,
-            )
+            print(f"{name} = {interval_text(q)}, tau {q['tau']:.3g}, ESS {q['ess']:.4g}",
+                  file=sys.stderr)  # fmt: skip
     print(f"acceptance {d['acceptance']:.3f}; {d['message']}", file=sys.stderr)
     out = {**post.to_json(), "out": str(out_toml), "chain": str(chain)}
     if not args.no_plots:
@@ -136,3 +133,21 @@ def _check_inputs_survive(args, command_error) -> None:
                     f"input {p} would be overwritten by the output {args.out / name}; "
                     "give another --out folder"
                 )
+
+
+def interval_text(q: dict) -> str:
+    """Median with its 68 % and 95 % intervals, with enough digits that the 68 % bounds differ.
+
+    A narrow posterior far from zero (f_1 = 16.328 Hz known to 1e-4 Hz) printed to five
+    significant digits shows the same number three times; the digits follow the interval.
+    """
+    width = abs(q["q84"] - q["q16"])
+    scale = max(abs(q["median"]), abs(q["q16"]), abs(q["q84"]))
+    digits = 5
+    if width > 0 and scale > 0:
+        digits = max(digits, math.ceil(math.log10(scale / width)) + 2)
+    f = f".{min(digits, 15)}g"
+    return (
+        f"{q['median']:{f}} (68%: {q['q16']:{f}} .. {q['q84']:{f}}; "
+        f"95%: {q['q2.5']:{f}} .. {q['q97.5']:{f}})"
+    )
