@@ -392,6 +392,8 @@ def test_cli_synth_train_evaluate_classify(tmp_path, capsys):
     assert main(["classify", str(model), str(rec), "--json"]) == 0
     res = json.loads(capsys.readouterr().out)
     assert res["label"] in ("brick", "sand") and len(res["windows"]) in (5, 6)
+    assert main(["classify", str(rec), str(model)]) == 2  # the arguments swapped
+    assert "MODEL " + str(rec) + " is a file that looks like a recording" in capsys.readouterr().err
     (model / "model.json").write_text("{}")
     assert main(["classify", str(model), str(rec)]) == 2
     assert "incompatible model format" in capsys.readouterr().err

@@ -2,7 +2,7 @@
 
 from pathlib import Path
 
-from ._common import CONTEXT_HELP, HelpFormatter, load_model, say
+from ._common import CONTEXT_HELP, CommandError, HelpFormatter, load_model, say
 
 
 def add_parser(sub) -> None:
@@ -28,6 +28,7 @@ def run(args) -> dict:
     """Label the recording (and plot its labels); returns the JSON summary."""
     from ..io import check_out_path, read_recording
 
+    _check_order(args.model, args.recording)
     if args.plot is not None:  # before any work
         check_out_path(args.plot, "--plot", inputs={"MODEL": args.model, "REC": args.recording})
     model = load_model(args.model, args.context)
@@ -49,3 +50,13 @@ def run(args) -> dict:
         out["plot"] = str(args.plot)
         say(f"wrote {args.plot}")
     return out
+
+
+def _check_order(model: Path, recording: Path) -> None:
+    """Refuse a recording given as MODEL (the arguments swapped, most often), in words."""
+    if model.is_file() and (recording.is_dir() or model.suffix.lower() == ".csv"):
+        raise CommandError(
+            f"MODEL {model} is a file that looks like a recording, and a model is the folder "
+            f"'whiskerid train' wrote (REC is {recording}): the order is "
+            "'whiskerid classify MODEL REC'"
+        )
