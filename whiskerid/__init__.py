@@ -1,6 +1,6 @@
 """whiskerid: differentiable system identification for compliant whisker sensors (JAX).
 
-Public API, re-exported from private modules (SI units throughout):
+Public API, re-exported from the sub-packages below (SI units throughout):
 
 * whiskers: :class:`Whisker` (the parameter pytree), :class:`CoilSpring`,
   :class:`UniformBeam`, :func:`whisker_from_structure`, :func:`paper_whisker`;
@@ -26,7 +26,7 @@ Public API, re-exported from private modules (SI units throughout):
 
 Sub-packages, along the data path (imports run one way, from the top of this list down):
 ``cli`` → ``hw`` → ``classify`` / ``posterior`` / ``plot`` → ``fit`` / ``terrain`` → ``model``
-→ ``io``. Names below are loaded on first use, so ``import whiskerid`` is cheap and does not
+→ ``io``. The names above are loaded on first use, so ``import whiskerid`` is cheap and does not
 start JAX; the first JAX-using name turns on float64 (``jax_enable_x64``): the models need it
 (the modal sums near the clamp and the root finding lose their accuracy in float32).
 """
