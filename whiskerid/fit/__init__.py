@@ -1,7 +1,7 @@
 """Fitting the model to recordings: least squares, calibration, window fits, start values.
 
 The fit problem is public, so that other packages (the posterior) build on it:
-:class:`FitProblem` (built from a record and :class:`Observation` s) gives the whisker at a
+:class:`FitProblem` (built from a record and :class:`Observation` objects) gives the whisker at a
 parameter pytree, each recording's design columns ``(D, g)``, the residuals
 (:func:`residuals` in optimistix's ``fn(y, args)`` form), the parameter flattening and the
 reported quantities; :func:`start_values`, :func:`solve` and :func:`covariance` are the
