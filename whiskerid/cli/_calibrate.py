@@ -128,14 +128,16 @@ def _check_sampling(rec, record) -> None:
         )
 
 
-def load_observation(path: Path, record, args):
-    """Read one recording and turn it into an :class:`whiskerid.Observation` per the flags."""
-    from ..fit import observation_from_recording
+def load_observations(path: Path, record, args) -> list:
+    """Read one recording and turn it into :class:`whiskerid.fit.Observation` s per the
+    flags: one per free decay found in a pluck recording (several plucks are fitted
+    jointly), else one."""
+    from ..fit import observations_from_recording
     from ..io import read_recording
 
     rec = read_recording(path, time_col=args.time_col)
     _check_sampling(rec, record)
-    return observation_from_recording(
+    return observations_from_recording(
         rec,
         record,
         signal_col=args.signal_col,
@@ -167,7 +169,7 @@ def _cmd_calibrate(args, command_error) -> dict:
         check_out_path(args.plot, "--plot", inputs={**inputs, "--out": args.out})
     check_data_options(args)
     record = load_record(args.whisker)
-    obs = [load_observation(p, record, args) for p in args.recordings]
+    obs = [o for p in args.recordings for o in load_observations(p, record, args)]
     static = read_static_test(args.static) if args.static else None
     cal = calibrate(
         record,
@@ -179,16 +181,7 @@ def _cmd_calibrate(args, command_error) -> dict:
         solver=args.solver,
     )
     cal.record.save(args.out)
-    p = cal.params
-    print(
-        f"{cal.status}: f1 = {p['f1_hz']['value']:.5g} ± {p['f1_hz']['std']:.2g} Hz, "
-        f"zeta = {p['zeta']['value']:.4g} ± {p['zeta']['std']:.2g}"
-        + "".join(
-            f", {k} = {p[k]['value']:.4g} ± {p[k]['std']:.2g}" for k in ("EI", "C") if k in p
-        ),
-        file=sys.stderr,
-    )
-    print(f"  {cal.note}", file=sys.stderr)
+    print(cal.report(), file=sys.stderr)
     print(f"wrote {args.out}", file=sys.stderr)
     out = {**cal.to_json(), "out": str(args.out)}
     if args.plot:
@@ -197,8 +190,9 @@ def _cmd_calibrate(args, command_error) -> dict:
         plot_calibration(args.plot, cal)
         out["plot"] = str(args.plot)
         print(f"wrote {args.plot}", file=sys.stderr)
-    if not cal.ok:
-        print("warning: the fit did not converge; the record holds its status", file=sys.stderr)
-    for warning in cal.warnings:
-        print(f"warning: {warning}", file=sys.stderr)
+    if cal.status != "ok":
+        print(
+            f"status {cal.status}: see the warnings above; the record holds the status and them",
+            file=sys.stderr,
+        )
     return out

@@ -24,6 +24,7 @@ from . import (
     _stream,
     _train,
 )
+from ._cache import enable_compile_cache
 from ._common import CommandError, json_safe, one_line
 
 # Reported on one line with exit status 2. The library's own errors (RecordError,
@@ -85,6 +86,7 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``whiskerid`` command; returns the exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    enable_compile_cache()
     start = time.perf_counter()
     try:
         result = args.func(args)

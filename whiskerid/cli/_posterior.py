@@ -5,7 +5,7 @@ import sys
 from pathlib import Path
 
 from .._choices import LIKELIHOODS, MOVES, PINS
-from ._calibrate import add_data_options, check_data_options, load_observation
+from ._calibrate import add_data_options, check_data_options, load_observations
 from ._common import HelpFormatter
 
 
@@ -52,7 +52,7 @@ def add_posterior(sub, command_error) -> None:
     p.add_argument("--resume", action="store_true", help="continue DIR/chain.h5 by --steps")
     p.add_argument("--no-plots", action="store_true", help="skip the corner and trace PNGs")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    # Data options, as in `whiskerid calibrate` (read by its load_observation).
+    # Data options, as in `whiskerid calibrate` (read by its load_observations).
     add_data_options(p)
     p.add_argument("--pin", choices=PINS, default="auto", help="auto: the fit's pin")
     p.add_argument("--modes", type=int, help="modes in the model (the fit's by default)")
@@ -77,7 +77,7 @@ def _cmd_posterior(args, command_error) -> dict:
     _check_inputs_survive(args, command_error)
 
     record = load_record(args.fit)
-    obs = [load_observation(p, record, args) for p in args.recordings]
+    obs = [o for p in args.recordings for o in load_observations(p, record, args)]
     static = read_static_test(args.static) if args.static else None
     args.out.mkdir(parents=True, exist_ok=True)
     chain = args.out / "chain.h5"

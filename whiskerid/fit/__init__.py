@@ -46,6 +46,7 @@ from ._problem import solve as solve
 from ._release import Decay as Decay
 from ._release import find_decays as find_decays
 from ._release import steady_line as steady_line
+from ._report import fit_report as fit_report
 from ._signal import Peak as Peak
 from ._signal import amplitude_spectrum as amplitude_spectrum
 from ._signal import dominant_peaks as dominant_peaks

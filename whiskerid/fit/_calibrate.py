@@ -22,8 +22,11 @@ nuisances, ``y = D(θ) c + g(θ)``. Start values come from the data (module ``_s
 grid over ``(κ, ζ)`` seeded by the spectral peaks and the envelope's logarithmic decay, with
 the linear coefficients solved exactly at every grid point); the best point starts a
 Levenberg–Marquardt fit of all parameters (optimistix, ``throw=False``, a status per fit).
-The covariance is ``s²(JᵀJ)⁻¹`` at the optimum; with several recordings (or a static test)
-each block is weighted by its own residual scale from a first pass.
+The covariance is ``s²(JᵀJ)⁻¹`` at the optimum (through the SVD of the column-scaled
+Jacobian, see :func:`whiskerid.fit.covariance`); with several recordings (or a static test)
+each block is weighted by its own residual scale from a first pass. When the residuals are
+correlated a HAC (Newey–West) sandwich replaces it, and a converged fit must pass the checks
+of module ``_checks`` (residuals, bounds, plausibility, precision) to be called ``ok``.
 
 jaxopt is not used as a second backend: version 0.8.5 warns on import that it is no longer
 maintained (which fails a test run with ``filterwarnings = error``) and its
@@ -44,13 +47,16 @@ import numpy as np
 from .._choices import PINS
 from .._version import __version__
 from ..model import UniformBeam, WhiskerRecord
+from ._checks import LAG1_MAX, check_fit, hac_covariance, residual_peak
+from ._checks import lag1 as lag1_autocorr
+from ._lsq import scaled_inverse_gram
 from ._observation import CalibrationError, Observation, StaticTest, sha256_of
 from ._problem import (
     FitProblem,
-    covariance,
     gradient_cosine,
     reported_names,
     reported_with_jacobian,
+    residuals_and_jacobian,
     solve,
 )
 from ._start import start_values
@@ -66,8 +72,10 @@ class Calibration:
     """Outcome of :func:`calibrate`.
 
     Attributes:
-        status: ``"ok"`` or why not (``"not converged"``, ``"non-finite"``, or ``"poor fit"``
-            when the model explains little of a recording: see ``warnings``).
+        status: ``"ok"`` or why not: ``"not converged"``, ``"non-finite"``, ``"poor fit"``
+            (the model explains little of a recording) or ``"check"`` (converged, but a
+            check in ``checks`` failed: correlated residuals, a line left in the residuals,
+            ζ at a bound or implausible, f_1 far from the record's, or imprecise values).
         ok: Whether the solver reported success and the covariance is finite.
         params: Reported parameters, name → ``{"value", "std", "source"}`` (``source`` is
             ``"fit"`` or ``"derived"``, the latter with the pin it used).
@@ -80,6 +88,8 @@ class Calibration:
         solver: Solver name.
         curves: Per recording ``(t, y, model)`` in observed units (for plots).
         warnings: What the user should check (one sentence each), e.g. a poor fit.
+        checks: The failed checks of a converged fit, name → sentence (see
+            :mod:`whiskerid.fit._checks`); empty for ``ok``.
         problem: The fitted :class:`whiskerid.fit.FitProblem` (each recording weighted by
             its own residual scale).
         optimum: The parameter pytree at the optimum (``problem.flatten(optimum)`` is the
@@ -101,9 +111,16 @@ class Calibration:
         repr=False, default_factory=list
     )
     warnings: list[str] = field(default_factory=list)
+    checks: dict[str, str] = field(default_factory=dict)
     problem: FitProblem | None = field(default=None, repr=False)
     optimum: Any = field(default=None, repr=False)
     covariance: np.ndarray | None = field(default=None, repr=False)
+
+    def report(self) -> str:
+        """The console report (``whiskerid calibrate``): see :func:`whiskerid.fit.fit_report`."""
+        from ._report import fit_report
+
+        return fit_report(self)
 
     def to_json(self) -> dict:
         """The JSON summary (``whiskerid calibrate --json``)."""
@@ -119,6 +136,7 @@ class Calibration:
             "diagnostics": self.diagnostics,
             "recordings": self.per_recording,
             "warnings": self.warnings,
+            "checks": self.checks,
         }
 
 
@@ -175,8 +193,10 @@ def calibrate(
     # the blocks are then combined fairly and s² ≈ 1 (a reduced χ²).
     problem = problem.reweighted(problem.unflatten(res.value))
     res = solve(problem, problem.unflatten(res.value), solver=solver, max_steps=max_steps)
-    cov, s2 = covariance(problem, res.value)
-    cov, s2 = np.asarray(cov), float(s2)
+    resid_w, jac = (np.asarray(a) for a in residuals_and_jacobian(problem, res.value))
+    bread = np.asarray(scaled_inverse_gram(jac))
+    s2 = float(np.sum(resid_w**2) / max(resid_w.size - res.value.size, 1))
+    cov = s2 * bread
     # The solver's own test (steps below rtol 1e-10 of every parameter) can stall at
     # rounding level on long real recordings (timestamps rounded to 1 µs: the same optimum,
     # 400 steps); MINPACK's gradient test says whether the point is stationary anyway.
@@ -186,8 +206,20 @@ def calibrate(
     status = "ok" if ok else ("non-finite" if not np.isfinite(float(res.cost)) else "not converged")
 
     optimum = problem.unflatten(res.value)
-    params, corr, fixed, note = _report(record, problem, res.value, cov, static, nominal)
     per_rec, curves, resid = _per_recording(problem, optimum, obs)
+    uncertainty = "white noise: s^2 (J^T J)^-1"
+    cov_white = cov
+    if ok and max(r["lag1_autocorr"] for r in per_rec) > LAG1_MAX:
+        cov, lag = hac_covariance(_blocks(jac, resid_w, obs), bread)
+        uncertainty = (
+            f"HAC (Newey-West, Bartlett weights to lag {lag}): the residuals are correlated, "
+            "so the white-noise 1-sigma would be too small"
+        )
+    params, corr, fixed, note = _report(record, problem, res.value, cov, static, nominal)
+    if cov is not cov_white:
+        white, *_ = _report(record, problem, res.value, cov_white, static, nominal)
+        for k in params:
+            params[k]["std_white"] = white[k]["std"]
     diagnostics = {
         "rms_residual": [r["rms_residual"] for r in per_rec],
         "reduced_chi2": s2,
@@ -197,10 +229,15 @@ def calibrate(
         "steps": int(res.steps),
         "lag1_autocorr": [r["lag1_autocorr"] for r in per_rec],
         "weighted_rms": float(np.sqrt(np.mean(resid**2))),
+        "uncertainty": uncertainty,
     }
     warnings = _poor_fit_warnings(per_rec)
+    checks = check_fit(params, per_rec, float(nominal.natural_frequencies_hz[0])) if ok else {}
     if ok and warnings:
         status = "poor fit"
+    elif ok and checks:
+        status = "check"
+    warnings += [f"{name}: {text}" for name, text in checks.items()]
     out = Calibration(
         status=status,
         ok=ok,
@@ -214,11 +251,25 @@ def calibrate(
         solver=solver,
         curves=curves,
         warnings=warnings,
+        checks=checks,
         problem=problem,
         optimum=optimum,
         covariance=cov,
     )
     out.record = _updated_record(record, out, pin, static, obs, problem)
+    return out
+
+
+def _blocks(jac, resid, obs):
+    """``(J, r, correlated)`` rows of each recording, then the static test's rows (if any),
+    which are independent points."""
+    out, start = [], 0
+    for o in obs:
+        stop = start + o.t.size
+        out.append((jac[start:stop], resid[start:stop], True))
+        start = stop
+    if start < resid.size:
+        out.append((jac[start:], resid[start:], False))
     return out
 
 
@@ -314,8 +365,7 @@ def _per_recording(problem: FitProblem, optimum, obs):
         y_mean, y_std = float(np.mean(o.y)), float(np.std(o.y))
         model = model_n * y_std + y_mean
         r = o.y - model
-        rc = r - r.mean()
-        lag1 = float(np.sum(rc[1:] * rc[:-1]) / max(np.sum(rc**2), 1e-300))
+        lag1 = lag1_autocorr(r)
         c = np.asarray(rec["c"])
         nm = problem.n_modes
         amps = np.hypot(c[2 : 2 + nm], c[2 + nm : 2 + 2 * nm]) * y_std
@@ -330,6 +380,8 @@ def _per_recording(problem: FitProblem, optimum, obs):
             "rms_signal": y_std,
             "snr_db": float(20 * np.log10(y_std / max(np.sqrt(np.mean(r**2)), 1e-300))),
             "lag1_autocorr": lag1,
+            "residual_peak": residual_peak(o.t, r),
+            "selection": o.selection,
             "offset": float(c[0] * y_std + y_mean),
             "drift_per_s": float(c[1] * y_std / max(o.t[-1] - o.t[0], 1e-12)),
             "modal_amplitudes": [float(a) for a in amps],

@@ -346,6 +346,12 @@ def covariance(problem: FitProblem, flat) -> tuple[Array, Array]:
 
 
 @eqx.filter_jit
+def residuals_and_jacobian(problem: FitProblem, flat) -> tuple[Array, Array]:
+    """The weighted residual vector at ``flat`` and its Jacobian in the flat parameters."""
+    return _flat_residuals(flat, problem), jax.jacfwd(_flat_residuals)(flat, problem)
+
+
+@eqx.filter_jit
 def gradient_cosine(problem: FitProblem, flat) -> Array:
     """MINPACK's stationarity measure at ``flat`` (see ``_lsq.gradient_cosine``)."""
     return _lsq.gradient_cosine(_flat_residuals, flat, problem)

@@ -83,18 +83,24 @@ def find_decays(t: np.ndarray, y: np.ndarray) -> list[Decay]:
         return []
     period = max(2, round(1.0 / (f * dt)))
     clipped = clipped_mask(y)
-    events = _events(y, period, clipped)
+    env, threshold = _envelope(y, period)
+    active = (env > threshold) | clipped
     decays: list[Decay] = []
-    lo = 0
-    for k, (a, b) in enumerate(events):
-        hi = events[k + 1][0] if k + 1 < len(events) else y.size
-        d = _decay_in(t, y, clipped, period, a, b, lo, hi)
-        if d is not None:
-            decays.append(d)
-            lo = int(np.searchsorted(t, d.end_s, side="right"))
-        else:
-            lo = b
-    return decays
+    todo = [(0, y.size)]
+    while todo:
+        lo, hi = todo.pop()
+        if hi - lo < 6 * period or not np.any(active[lo:hi]):
+            continue
+        anchor = lo + int(np.argmax(np.where(active[lo:hi], env[lo:hi], -np.inf)))
+        d = _decay_in(t, y, clipped, active, f, anchor, lo, hi)
+        if d is None:  # not a decay here: look on either side of this stretch
+            todo += [(lo, max(lo, anchor - period)), (anchor + period, hi)]
+            continue
+        decays.append(d)
+        i0 = int(np.searchsorted(t, d.start_s))
+        i1 = int(np.searchsorted(t, d.end_s, side="right"))
+        todo += [(lo, i0), (i1, hi)]
+    return sorted(decays, key=lambda d: d.start_s)
 
 
 def dominant_frequency(t: np.ndarray, y: np.ndarray) -> float | None:
@@ -142,6 +148,13 @@ def clipped_mask(y: np.ndarray, *, min_run: int = 2) -> np.ndarray:
     return mask
 
 
+def quantum(y: np.ndarray) -> float:
+    """Half the smallest step between distinct sample values (a converter's resolution
+    shows as one; continuous data give a negligible one)."""
+    steps = np.diff(np.unique(y))
+    return 0.5 * float(steps.min()) if steps.size else 0.0
+
+
 def _moving(fn, x, width):
     """``fn`` (np.max or np.mean) over a centred window of ``width`` samples."""
     pad = width // 2
@@ -150,26 +163,13 @@ def _moving(fn, x, width):
     return fn(windows, axis=1)
 
 
-def _events(y, period, clipped):
-    """Index ranges ``[a, b)`` where the ringing envelope stands above the noise."""
+def _envelope(y, period):
+    """The ringing envelope (moving maximum over a period of the signal minus its moving
+    average) and the level above which it counts as ringing."""
     hp = y - _moving(np.mean, y, period)
     env = _moving(np.max, np.abs(hp), period)
-    noise = 1.4826 * np.median(np.abs(hp - np.median(hp)))
-    peak = float(np.max(env))
-    if peak <= 0:
-        return []
-    above = (env > max(8.0 * noise, 0.02 * peak)) | clipped
-    idx = np.flatnonzero(above)
-    if idx.size == 0:
-        return []
-    events, a, prev = [], idx[0], idx[0]
-    for i in idx[1:]:
-        if i - prev > 3 * period:  # quiet for three periods: a new event
-            events.append((int(a), int(prev) + 1))
-            a = i
-        prev = i
-    events.append((int(a), int(prev) + 1))
-    return [(a, b) for a, b in events if b - a >= 2 * period]
+    noise = max(1.4826 * np.median(np.abs(hp - np.median(hp))), quantum(y))
+    return env, max(8.0 * noise, 0.02 * float(np.max(env)))
 
 
 # --------------------------------------------------------------------------- the decay model
@@ -183,10 +183,24 @@ def _columns(t, t0, freqs, rates):
 
 
 def _linear_fit(t, y, t0, freqs, rates):
+    """Residuals of the decay model with its linear part fitted to ``(t, y)``."""
     a = _columns(t, t0, freqs, rates)
     scale = np.maximum(np.linalg.norm(a, axis=0), 1e-300)
     coef, *_ = np.linalg.lstsq(a / scale, y, rcond=None)
     return y - (a / scale) @ coef
+
+
+def _predict(t, y, fit, at, t0, freqs, rates):
+    """The decay model fitted on indices ``fit`` (a slice), predicting indices ``at``:
+    returns the misfit there and the oscillation's RMS amplitude there."""
+    a = _columns(t[fit], t0, freqs, rates)
+    scale = np.maximum(np.linalg.norm(a, axis=0), 1e-300)
+    coef, *_ = np.linalg.lstsq(a / scale, y[fit], rcond=None)
+    coef = coef / scale
+    b = _columns(t[at], t0, freqs, rates)
+    misfit = y[at] - b @ coef
+    oscillation = b[:, 2:] @ coef[2:]
+    return misfit, float(np.sqrt(np.mean(oscillation**2)))
 
 
 def _fit_tail(t, y, f0):
@@ -220,25 +234,34 @@ def _robust_rms(r):
     return max(1.4826 * float(np.median(np.abs(r - np.median(r)))), 1e-300)
 
 
-def _decay_in(t, y, clipped, period, a, b, lo, hi):
-    """The decay of event ``[a, b)``, searched within ``[lo, hi)``; None if it does not ring."""
-    hp = np.abs(y[a:b] - _moving(np.mean, y[a:b], period))
-    anchor = a + int(np.argmax(hp))
+def _decay_in(t, y, clipped, active, f, anchor, lo, hi):
+    """The decay that rings at ``anchor`` at the record's dominant frequency ``f``, searched
+    within ``[lo, hi)``; None if none does."""
+    period = max(2, round(1.0 / (f * float(np.median(np.diff(t))))))
     ta = min(anchor + period, hi - 4 * period)
-    tb = min(hi, ta + 20 * period)
-    if ta < lo or tb - ta < 4 * period:
+    if ta < lo:
+        return None
+    clipped_after = np.flatnonzero(clipped[ta:hi])
+    if clipped_after.size:  # ringing at the rails: the decay starts after the last clip
+        ta = ta + int(clipped_after[-1]) + 1
+    # the tail: up to 20 periods, and no further than the ringing lasts (a pluck that
+    # follows soon must not enter the fit of this one's frequencies)
+    quiet = np.flatnonzero(~active[ta:hi])
+    ring_end = ta + int(quiet[0]) if quiet.size else hi
+    tb = min(hi, ta + 20 * period, max(ring_end + period, ta + 4 * period))
+    if tb - ta < 4 * period:
         return None
     seg = slice(ta, tb)
-    if np.any(clipped[seg]):
-        ta = ta + int(np.flatnonzero(clipped[seg])[-1]) + 1
-        seg = slice(ta, tb)
-        if tb - ta < 4 * period:
-            return None
     f0 = dominant_frequency(t[seg], y[seg]) or 1.0 / (period * np.median(np.diff(t)))
     freqs, rates = _fit_tail(t[seg], y[seg], f0)
-    sigma = _robust_rms(_linear_fit(t[seg], y[seg], t[ta], freqs, rates))
+    resid = _linear_fit(t[seg], y[seg], t[ta], freqs, rates)
+    sigma = max(_robust_rms(resid), quantum(y))
+    if np.max(np.abs(y[seg] - resid - np.median(y[seg] - resid))) < 5 * sigma:
+        return None  # nothing rings above the noise
+    if not np.any(np.abs(np.log(np.abs(np.asarray(freqs)) / f + 1e-300)) < np.log(1.25)):
+        return None  # a bend or a knock, not the whisker ringing at its frequency
     start = _walk_back(t, y, clipped, period, ta, lo, freqs, rates, sigma)
-    end = _walk_forward(t, y, period, start, ta, hi, freqs, rates, sigma)
+    end = _walk_forward(t, y, period, start, ta, tb, hi, freqs, rates, sigma)
     before = np.flatnonzero(clipped[lo:start])
     clipped_until = float(t[lo + before[-1]]) if before.size else None
     return Decay(
@@ -250,44 +273,49 @@ def _decay_in(t, y, clipped, period, a, b, lo, hi):
     )
 
 
-def _fits(t, y, i, j, check, t0, freqs, rates, sigma):
-    """Whether the model refitted on ``[i, j)`` explains samples ``check`` within tolerance."""
-    r = _linear_fit(t[i:j], y[i:j], t0, freqs, rates)
-    return np.sqrt(np.mean(r[check] ** 2)) <= TOLERANCE * sigma
+def _explains(misfit, oscillation, sigma):
+    """Whether a predicted stretch matches: within a few noise scales plus a tenth of the
+    oscillation (frequencies and rates fitted on the tail are not exact, so the misfit of a
+    true continuation grows with its amplitude; a hold or a rest misses by the whole of it)."""
+    return np.sqrt(np.mean(misfit**2)) <= TOLERANCE * sigma + 0.1 * oscillation
 
 
 def _walk_back(t, y, clipped, period, ta, lo, freqs, rates, sigma):
-    """Earliest index from which the decay model explains the data back from ``ta``."""
+    """Earliest index from which the decay model, fitted on what is already accepted, keeps
+    predicting the data going back from ``ta`` (half a period at a time, then by samples)."""
     width = 8 * period
     half = max(1, period // 2)
     s = ta
     while s - half >= lo and not np.any(clipped[s - half : s]):
-        i = s - half
-        if not _fits(t, y, i, i + width, slice(0, half), t[ta], freqs, rates, sigma):
+        misfit, osc = _predict(t, y, slice(s, s + width), slice(s - half, s), t[ta], freqs, rates)
+        if not _explains(misfit, osc, sigma):
             break
-        s = i
-    # sample by sample: stop at two consecutive samples off the model
+        s -= half
     i, misses = s - 1, 0
     while i >= lo and not clipped[i]:
-        r = _linear_fit(t[i : i + width], y[i : i + width], t[ta], freqs, rates)
-        if abs(r[0]) > TOLERANCE * sigma:
+        misfit, osc = _predict(t, y, slice(i + 1, i + 1 + width), slice(i, i + 1), t[ta], freqs,
+                               rates)  # fmt: skip
+        if _explains(misfit, osc, sigma):
+            misses, s = 0, i
+        else:
             misses += 1
             if misses == 2:
                 break
-        else:
-            misses, s = 0, i
         i -= 1
     return s
 
 
-def _walk_forward(t, y, period, start, ta, hi, freqs, rates, sigma):
-    """One past the last index that the decay model (from ``start``) explains."""
+def _walk_forward(t, y, period, start, ta, tb, hi, freqs, rates, sigma):
+    """One past the last index that the decay model (fitted from ``start``) keeps predicting."""
     chunk = max(2, period // 2)
     e = min(hi, ta + 4 * period)
+    # The model's linear part is fitted up to the tail's end, never on what follows: a
+    # refit would follow the next pluck's slow bend step by step.
     while e < hi:
         c = min(chunk, hi - e)
-        check = slice(e - start, e - start + c)
-        if not _fits(t, y, start, e + c, check, t[ta], freqs, rates, sigma):
+        fit = slice(start, min(e, tb))
+        misfit, osc = _predict(t, y, fit, slice(e, e + c), t[ta], freqs, rates)
+        if not _explains(misfit, osc, sigma):
             break
         e += c
     return e

@@ -100,11 +100,12 @@ def start_values(
     """
     f1_nom = f1_hz or float(nominal.natural_frequencies_hz[0])
     zeta_nom = float(np.mean(nominal.zeta))
-    # f_1 is searched within a factor 1.6 of the nominal: at low sample rates a higher mode
-    # can alias onto the first (e.g. f_2 = 645 Hz folds to 45 Hz at 200 Hz), and only the
-    # nominal tells these apart; near-ties are broken towards the nominal below.
-    lo, hi = f1_nom / 1.6, f1_nom * 1.6
-    f_cands = list(f1_nom * np.geomspace(1 / 1.6, 1.6, 25))
+    # f_1 is searched within a factor 2.5 of the nominal (a whisker's f_1 may be half or
+    # twice its record's). At low sample rates a higher mode can alias onto the first
+    # (e.g. f_2 = 645 Hz folds to 45 Hz at 200 Hz): each candidate is judged by the cost of
+    # the whole multi-mode model, and near-ties are broken towards the nominal below.
+    lo, hi = f1_nom / 2.5, f1_nom * 2.5
+    f_cands = list(f1_nom * np.geomspace(1 / 2.5, 2.5, 33))
     z_cands = [zeta_nom * k for k in (0.25, 0.5, 1.0, 2.0, 4.0)]
     for o in observations:
         if o.excitation != "decay":

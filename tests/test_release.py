@@ -1,0 +1,94 @@
+"""Release detection on the plucks people make, the steady-sine refusal, and the covariance
+of an ill-conditioned Jacobian.
+
+Plucks come from :func:`whiskerid.model.simulate_pluck` (the exact model with all of the
+record's modes, Hall sensor, ADS1115). The detector itself uses no whisker model, so agreement
+with the simulator's release times is a real check.
+"""
+
+from dataclasses import replace
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from whiskerid.fit import CalibrationError, find_decays, observation_from_recording
+from whiskerid.fit._lsq import scaled_inverse_gram
+from whiskerid.io import Recording
+from whiskerid.model import paper_record, simulate, simulate_pluck
+
+# kind, plucks, sampling rate (Hz), tip deflection (m), Hall offset (V) or None, ADC FSR (V)
+SLOW = pytest.mark.slow
+PLUCKS = [
+    ("held", 1, 860.0, 2e-3, None, 4.096),
+    pytest.param("held", 3, 860.0, 2e-3, None, 4.096, marks=SLOW),
+    pytest.param("flick", 1, 475.0, 2e-3, None, 4.096, marks=SLOW),
+    pytest.param("tap", 2, 860.0, 2e-3, None, 4.096, marks=SLOW),
+    ("late", 1, 860.0, 2e-3, None, 4.096),
+    pytest.param("held", 1, 200.0, 2e-3, None, 4.096, marks=SLOW),  # f_2 aliases to 88 Hz
+    ("held", 1, 860.0, 4e-3, 2.04, 2.048),  # the first cycles clip at the top rail
+]
+
+
+def _record(f1_factor=1.0, zeta=0.04, rate_hz=860.0, offset_v=None, fsr_v=4.096):
+    rec = paper_record()
+    s = rec.structure
+    adc = replace(rec.adc, data_rate_sps=860 if rate_hz > 475 else 475, fsr_v=fsr_v)
+    hall = rec.hall if offset_v is None else replace(rec.hall, offset_v=offset_v)
+    structure = replace(s, shear_modulus_pa=s.shear_modulus_pa * f1_factor**2)
+    return rec.replace(structure=structure, zeta=zeta, adc=adc, hall=hall)
+
+
+@pytest.mark.parametrize(("kind", "n", "rate", "tip", "offset", "fsr"), PLUCKS)
+def test_decays_start_at_the_release(kind, n, rate, tip, offset, fsr):
+    rec = _record(rate_hz=rate, offset_v=offset, fsr_v=fsr)
+    r, truth = simulate_pluck(
+        rec, kind=kind, n_plucks=n, rate_hz=rate, tip_deflection_m=tip, gap_s=0.8,
+        duration_s=0.6 + 0.8 * n + 0.4, seed=3,
+    )  # fmt: skip
+    y = r.signal().astype(float)
+    decays = find_decays(r.t, y)
+    assert len(decays) == n
+    period = 1 / 46.0
+    for d, release, end in zip(decays, truth.releases_s, truth.ends_s, strict=True):
+        if offset is not None:  # clipped: the decay starts after the last clipped sample
+            assert d.clipped_until_s is not None and d.clipped_until_s > release
+            assert d.start_s > d.clipped_until_s
+            assert np.all(y[(r.t >= d.start_s) & (r.t <= d.end_s)] < y.max())
+            continue
+        # never before the release (beyond a sample), at most a period after it
+        assert release - 1.5 / rate <= d.start_s <= release + period
+        assert d.end_s <= end + period  # a bend starts smoothly
+        assert d.frequency_hz == pytest.approx(46.0, rel=0.05)
+
+
+def test_quiet_record_has_no_decay():
+    rng = np.random.default_rng(0)
+    t = np.arange(2000) / 860.0
+    assert find_decays(t, rng.standard_normal(t.size)) == []
+
+
+def test_unlabelled_sine_is_refused_not_fitted_as_a_decay():
+    rec = paper_record()
+    r = simulate(rec, excitation="sine", fb_hz=30.0, hb_m=2e-4, observable="adc", rate_hz=200.0,
+                 duration_s=4.0, noise_db=30.0, seed=2)  # fmt: skip
+    bare = Recording(t=r.t, columns=r.columns, meta={"rate_hz": "200"}, source="s.csv")
+    with pytest.raises(CalibrationError, match=r"steady line at 30(\.0*)? Hz.*--excitation sine"):
+        observation_from_recording(bare, rec)
+    # a pluck without metadata is taken for what it is
+    p, _ = simulate_pluck(rec, kind="held", seed=1)
+    obs = observation_from_recording(Recording(t=p.t, columns=p.columns, meta={}), rec)
+    assert obs.excitation == "decay" and obs.selection.startswith("decay")
+
+
+def test_covariance_survives_columns_of_very_different_scales():
+    """(JᵀJ)⁻¹ for J = A·diag(d) with d over twelve decades is diag(1/d)(AᵀA)⁻¹diag(1/d);
+    a pseudo-inverse of JᵀJ (condition ~1e24) loses the small directions entirely."""
+    rng = np.random.default_rng(1)
+    a = rng.standard_normal((500, 5))
+    d = np.array([1e-6, 1e-2, 1.0, 1e2, 1e6])
+    exact = np.linalg.inv(a.T @ a) / np.outer(d, d)
+    got = np.asarray(scaled_inverse_gram(jnp.asarray(a * d)))
+    np.testing.assert_allclose(np.diag(got), np.diag(exact), rtol=1e-9)
+    old = np.linalg.pinv((a * d).T @ (a * d), hermitian=True)
+    assert np.diag(old)[-1] < 0.5 * np.diag(exact)[-1] or np.diag(old)[0] < 0.5 * np.diag(exact)[0]

@@ -1,0 +1,151 @@
+"""What a converged fit must still pass before its numbers are called ``ok``, and
+uncertainties that stay honest when the residuals are not white noise.
+
+A least-squares fit converges to *something* whatever the data: a held segment taken for a
+decay, a sine fitted as a pluck, the wrong whisker's record. The checks here look at what the
+fit left behind and at what it found, each with a name, a threshold and a sentence:
+
+* ``correlated-residuals``: residuals with lag-1 autocorrelation above 0.5 are not noise but
+  an unmodelled signal; the white-noise 1σ is then too small (it is replaced, see below);
+* ``residual-peak``: a spectral line in the residuals far above their noise floor (a mode,
+  a drive or a ringing the model does not explain);
+* ``at-bound``: ζ at a bound of its range;
+* ``zeta-large``: ζ above 0.2, implausible for a whisker (coil springs and thin beams ring
+  with ζ of a few percent);
+* ``far-from-nominal``: f_1 outside 0.4–2.5 times the record's (EI outside 0.16–6.25
+  times): the record is probably not this whisker's;
+* ``imprecise``: f_1 known to worse than 0.5 % or ζ to worse than 10 % (1σ).
+
+When the residuals are correlated, the covariance ``s²(JᵀJ)⁻¹`` assumes information that is
+not there (each sample counted as independent). The heteroskedasticity-and-autocorrelation
+consistent (HAC, Newey–West) sandwich ``(JᵀJ)⁻¹ (Σ_l w_l Γ_l) (JᵀJ)⁻¹``, with ``Γ_l`` the
+lag-``l`` autocovariance of the per-sample scores ``J_t r_t`` within each recording and
+Bartlett weights ``w_l = 1 − l/(L+1)`` up to the lag ``L`` where the residuals' autocorrelation
+has died out, is then reported instead, and the report says so.
+"""
+
+import numpy as np
+
+from ._problem import ZETA_MAX
+
+#: Lag-1 autocorrelation of the residuals above which they are not treated as white noise.
+LAG1_MAX = 0.5
+#: ζ above this is implausible for a whisker.
+ZETA_PLAUSIBLE = 0.2
+#: f_1 outside this range of the record's nominal (ratio) means a wrong record.
+F1_RATIO = (0.4, 2.5)
+#: Relative 1σ of f_1 and of ζ above which a fit is imprecise.
+F1_REL_STD, ZETA_REL_STD = 0.005, 0.10
+
+
+def lag1(r: np.ndarray) -> float:
+    """Lag-1 autocorrelation of ``r`` about its mean."""
+    rc = r - r.mean()
+    return float(np.sum(rc[1:] * rc[:-1]) / max(np.sum(rc**2), 1e-300))
+
+
+def residual_peak(t: np.ndarray, r: np.ndarray) -> tuple[float, float] | None:
+    """The strongest line left in the residuals as ``(frequency Hz, power / noise floor)``,
+    or None when no bin stands out of white noise.
+
+    For white noise the periodogram's bins are exponentially distributed; the largest of
+    ``N`` exceeds ``median · (ln N + 8)/ln 2`` with probability about ``e⁻⁸``.
+    """
+    n = r.size
+    if n < 64:
+        return None
+    dt = float(np.median(np.diff(t)))
+    ru = np.interp(t[0] + dt * np.arange(n), t, r)
+    p = np.abs(np.fft.rfft((ru - ru.mean()) * np.hanning(n))) ** 2
+    p = p[1:]  # DC and drift are the offset's business
+    floor = float(np.median(p))
+    if floor <= 0:
+        return None
+    i = int(np.argmax(p))
+    ratio = float(p[i] / floor)
+    if ratio < (np.log(p.size) + 8.0) / np.log(2.0):
+        return None
+    return (i + 1) / (n * dt), ratio
+
+
+def hac_lag(r: np.ndarray) -> int:
+    """Lag after which the residuals' autocorrelation stays below 0.1 in magnitude."""
+    n = r.size
+    rc = r - r.mean()
+    f = np.fft.rfft(rc, 2 * n)
+    acf = np.fft.irfft(f * np.conj(f))[:n]
+    acf = acf / max(acf[0], 1e-300)
+    tail_max = np.maximum.accumulate(np.abs(acf[::-1]))[::-1]
+    below = np.flatnonzero(tail_max < 0.1)
+    lag = int(below[0]) if below.size else n
+    return int(min(max(lag, 1), n // 4))
+
+
+def hac_covariance(
+    blocks: list[tuple[np.ndarray, np.ndarray, bool]], bread: np.ndarray
+) -> tuple[np.ndarray, int]:
+    """Newey–West covariance from ``(J, r, correlated)`` row blocks and ``bread = (JᵀJ)⁺``.
+
+    Rows of different blocks are independent; within a block marked ``correlated`` the
+    scores are summed with Bartlett weights up to :func:`hac_lag` of its residuals.
+
+    Returns:
+        The covariance and the largest lag used.
+    """
+    p = bread.shape[0]
+    meat = np.zeros((p, p))
+    max_lag = 0
+    for jac, r, correlated in blocks:
+        scores = jac * r[:, None]
+        meat += scores.T @ scores
+        if not correlated:
+            continue
+        lag = hac_lag(r)
+        max_lag = max(max_lag, lag)
+        for ell in range(1, lag + 1):
+            g = scores[ell:].T @ scores[:-ell]
+            meat += (1.0 - ell / (lag + 1.0)) * (g + g.T)
+    return bread @ meat @ bread, max_lag
+
+
+def check_fit(params: dict, per_rec: list[dict], f1_nominal_hz: float) -> dict[str, str]:
+    """The failed checks of a converged fit, name → sentence (see the module docstring)."""
+    out: dict[str, str] = {}
+    worst = max(per_rec, key=lambda r: r["lag1_autocorr"])
+    if worst["lag1_autocorr"] > LAG1_MAX:
+        out["correlated-residuals"] = (
+            f"the residuals of {worst['name']} are correlated (lag-1 autocorrelation "
+            f"{worst['lag1_autocorr']:.2f}): the model misses part of the signal; the "
+            "uncertainties allow for it (HAC), the values may be biased"
+        )
+    peaks = [(r["name"], r["residual_peak"]) for r in per_rec if r.get("residual_peak")]
+    if peaks:
+        name, (f, ratio) = max(peaks, key=lambda x: x[1][1])
+        out["residual-peak"] = (
+            f"a line at {f:.4g} Hz is left in the residuals of {name} ({10 * np.log10(ratio):.0f} "
+            "dB above their noise floor): an unmodelled mode, drive or ringing (check the "
+            "excitation, --modes and where the decay starts)"
+        )
+    zeta = params["zeta"]
+    if not 1e-5 < zeta["value"] < 0.98 * ZETA_MAX:
+        out["at-bound"] = f"zeta = {zeta['value']:.3g} is at a bound of its range"
+    elif zeta["value"] > ZETA_PLAUSIBLE:
+        out["zeta-large"] = (
+            f"zeta = {zeta['value']:.3g} is implausibly large for a whisker (above "
+            f"{ZETA_PLAUSIBLE}): check where the decay starts and the excitation"
+        )
+    f1 = params["f1_hz"]
+    ratio = f1["value"] / f1_nominal_hz
+    if not F1_RATIO[0] <= ratio <= F1_RATIO[1]:
+        out["far-from-nominal"] = (
+            f"f1 = {f1['value']:.4g} Hz is {ratio:.2g} times the record's {f1_nominal_hz:.4g} "
+            "Hz: is the record this whisker's?"
+        )
+    rel_f1 = f1["std"] / abs(f1["value"])
+    rel_z = zeta["std"] / max(abs(zeta["value"]), 1e-300)
+    if not (rel_f1 <= F1_REL_STD and rel_z <= ZETA_REL_STD):
+        out["imprecise"] = (
+            f"the data determine f1 to {100 * rel_f1:.2g} % and zeta to {100 * rel_z:.2g} % "
+            "(1 sigma): record a longer or cleaner decay"
+        )
+    return out
