@@ -1,39 +1,86 @@
-"""Calibration plots: data and fit over time, residuals, and the spectra (matplotlib, Agg)."""
+"""Calibration plots: data and fit over the whole window and zoomed on the decay's start,
+residuals, and the spectra (matplotlib, Agg)."""
 
 from pathlib import Path
 
 import numpy as np
 
+from .._choices import UNITS
 from ..fit import amplitude_spectrum, resample_uniform
 from ._plot import _pyplot, _save
 
+#: Periods of f_1 shown in the zoom on the start of each fitted window.
+ZOOM_PERIODS = 8
+
 
 def plot_calibration(path: str | Path, cal) -> Path:
-    """Save one row per recording: data and fit, residuals, and both spectra."""
+    """Save one row per recording: the fitted window (data and fit), a zoom on its first
+    periods, the residuals, and the spectra of data, fit and residuals (the fitted modes
+    marked where the sampling puts them)."""
     plt = _pyplot()
     n = len(cal.curves)
-    fig, axes = plt.subplots(n, 3, figsize=(13, 2.8 * n), constrained_layout=True, squeeze=False)
-    for (ax_y, ax_r, ax_f), (t, y, model), info in zip(
-        axes, cal.curves, cal.per_recording, strict=True
-    ):
-        ax_y.plot(t, y, ".", ms=1.5, label="data")
-        ax_y.plot(t, model, lw=0.7, label="fit")
-        ax_y.set_xlabel("t (s)")
-        ax_y.set_ylabel(info["observable"])
-        ax_y.set_title(info["name"], fontsize=9)
-        ax_y.legend(fontsize=7)
-        ax_r.plot(t, y - model, lw=0.5, color="C3")
-        ax_r.set_xlabel("t (s)")
-        ax_r.set_title(f"residuals, RMS {info['rms_residual']:.3g}", fontsize=9)
-        for sig, label in ((y, "data"), (model, "fit")):
-            _, su, rate = resample_uniform(t, sig)
-            f, a = amplitude_spectrum(su, rate)
-            ax_f.semilogy(f, np.maximum(a, 1e-30), lw=0.7, label=label)
-        ax_f.set_xlabel("frequency (Hz)")
-        ax_f.legend(fontsize=7)
+    fig, axes = plt.subplots(
+        n, 4, figsize=(16, 3.0 * n), constrained_layout=True, squeeze=False,
+        gridspec_kw={"width_ratios": [1.3, 1.0, 1.0, 1.2]},
+    )  # fmt: skip
+    f1 = cal.params["f1_hz"]["value"]
+    modes = [cal.params[k]["value"] for k in cal.params if k[0] == "f" and k.endswith("_hz")]
+    for row, (t, y, model), info in zip(axes, cal.curves, cal.per_recording, strict=True):
+        unit = UNITS.get(info["observable"], "")
+        _time_panels(row[0], row[1], t, y, model, f1, info, unit)
+        row[2].plot(t, y - model, lw=0.5, color="C3")
+        row[2].set_xlabel("t (s)")
+        row[2].set_ylabel(f"residual ({unit})")
+        row[2].set_title(
+            f"residuals: RMS {info['rms_residual']:.3g} {unit}, lag-1 {info['lag1_autocorr']:.2f}",
+            fontsize=9,
+        )
+        _spectra(row[3], t, y, model, modes, unit)
     p = cal.params
     fig.suptitle(
-        f"f1 = {p['f1_hz']['value']:.5g} ± {p['f1_hz']['std']:.2g} Hz, "
-        f"zeta = {p['zeta']['value']:.4g} ± {p['zeta']['std']:.2g} ({cal.status})"
+        f"{cal.record.name}: f1 = {p['f1_hz']['value']:.5g} ± {p['f1_hz']['std']:.2g} Hz, "
+        f"zeta = {p['zeta']['value']:.4g} ± {p['zeta']['std']:.2g}  (status {cal.status})"
     )
     return _save(fig, path)
+
+
+def _time_panels(ax_all, ax_zoom, t, y, model, f1, info, unit):
+    end = min(t[-1], t[0] + ZOOM_PERIODS / max(f1, 1e-9))
+    ax_all.plot(t, y, ".", ms=1.2, color="C0", label="data")
+    ax_all.plot(t, model, lw=0.6, color="C1", label="fit")
+    ax_all.axvspan(t[0], end, color="0.9", zorder=-1, label="zoom →")
+    ax_all.set_xlabel("t (s)")
+    ax_all.set_ylabel(f"{info['observable']} ({unit})")
+    where = info.get("selection") or f"from {info['t_start_s']:.4g} s"
+    ax_all.set_title(f"{info['name']}: {where}", fontsize=8)
+    ax_all.legend(fontsize=7, loc="upper right")
+    keep = t <= end
+    ax_zoom.plot(t[keep], y[keep], ".-", ms=2.5, lw=0.3, color="C0", label="data")
+    ax_zoom.plot(t[keep], model[keep], lw=0.9, color="C1", label="fit")
+    ax_zoom.set_xlabel("t (s)")
+    ax_zoom.set_title(f"first {ZOOM_PERIODS} periods of f1", fontsize=9)
+
+
+def _spectra(ax, t, y, model, modes, unit):
+    rate = 1.0
+    for sig, label, color in (
+        (y, "data", "C0"),
+        (model, "fit", "C1"),
+        (y - model, "residuals", "C3"),
+    ):
+        _, su, rate = resample_uniform(t, sig)
+        f, a = amplitude_spectrum(su, rate)
+        ax.semilogy(f, np.maximum(a, 1e-30), lw=0.7, label=label, color=color)
+    nyquist = rate / 2
+    for k, fm in enumerate(modes):
+        seen = abs(fm - rate * round(fm / rate))  # where the sampling puts it
+        if seen <= nyquist:
+            tag = f"f{k + 1}" + ("" if abs(seen - fm) < 1e-9 * fm else " (aliased)")
+            ax.axvline(seen, ls="--", lw=0.6, color="0.4")
+            ax.text(seen, 1.0, tag, transform=ax.get_xaxis_transform(), fontsize=7,
+                    ha="center", va="bottom")  # fmt: skip
+    ax.set_xlim(0, min(nyquist, max(6 * modes[0], 1.3 * max(m for m in modes if m < nyquist)
+                                    if any(m < nyquist for m in modes) else nyquist)))  # fmt: skip
+    ax.set_xlabel("frequency (Hz)")
+    ax.set_ylabel(f"amplitude ({unit})")
+    ax.legend(fontsize=7, loc="upper right")
