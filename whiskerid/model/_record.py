@@ -217,6 +217,9 @@ def _structure(table: dict) -> Structure:
             f"structure: unknown field(s) {sorted(unknown)} for kind {kind!r}; "
             f"known: {sorted(names)}"
         )
+    for key, value in table.items():  # before the classes' own checks: say the range
+        if f"structure.{key}" in RANGES and isinstance(value, int | float):
+            _check_range(f"structure.{key}", value)
     try:
         return cls(**{k: v for k, v in table.items() if k != "kind"})
     except TypeError as err:  # a required field is absent, or a value is not a number
