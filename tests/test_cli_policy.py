@@ -2,6 +2,7 @@
 
 import argparse
 import errno
+import json
 import os
 import re
 import signal
@@ -298,3 +299,53 @@ def test_the_rate_finder_says_what_to_do(case):
     t, words = TIMES[case]
     with pytest.raises(wi.RecordingError, match=words):
         timestamp_rate(t, where="r.csv")
+
+
+# ------------------------------------------------------------------------ posterior, end to end
+def _read_until(stream, marker: str, limit_s: float = 240.0) -> str:
+    """What a child's stderr holds up to ``marker`` (read in bytes: progress bars use '\\r')."""
+    import select
+    import time
+
+    seen, end = b"", time.monotonic() + limit_s
+    while marker.encode() not in seen and time.monotonic() < end:
+        ready, _, _ = select.select([stream], [], [], 1.0)
+        if ready:
+            chunk = os.read(stream.fileno(), 4096)
+            if not chunk:
+                break
+            seen += chunk
+    return seen.decode(errors="replace")
+
+
+@pytest.mark.slow  # a posterior in a child process: compiles, samples, is stopped, resumes
+def test_posterior_stops_between_steps_and_resumes_only_on_the_same_data(tmp_path, capsys):
+    for seed in (1, 2):
+        sim = wi.simulate(wi.paper_record(), excitation="decay", tip_deflection_m=2e-3,
+                          rate_hz=200.0, duration_s=2.0, noise_db=30.0, seed=seed)  # fmt: skip
+        write_csv(tmp_path / f"rec{seed}.csv", sim)
+    fit = tmp_path / "cal.toml"
+    rec = str(tmp_path / "rec1.csv")
+    assert main(["calibrate", rec, "--whisker", PAPER, "--out", str(fit), "--t-end", "1.8"]) == 0
+    assert wi.load_record(fit).extra["fit"]["options"] == {"t_end": 1.8}
+    capsys.readouterr()
+    out = tmp_path / "post"
+    argv = ["posterior", rec, "--fit", str(fit), "--out", str(out), "--walkers", "16"]
+    cmd = [sys.executable, "-m", "whiskerid.cli", *argv, "--steps", "100000", "--json"]
+    child = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    seen = _read_until(child.stderr, "it/s]")  # the progress bar, on stderr despite --json
+    assert "data options from the fit record: --t-end 1.8" in seen
+    child.send_signal(signal.SIGINT)
+    stdout, rest = (b.decode() for b in child.communicate(timeout=120))
+    assert child.returncode == 130
+    assert stdout == "" and "Traceback" not in rest and "emcee" not in rest
+    last = rest.strip().splitlines()[-1]
+    assert last.startswith("whiskerid posterior: interrupted (SIGINT); kept")
+    assert "continue it with --resume" in last
+    # Another recording cannot continue this chain; the same one can.
+    other = str(tmp_path / "rec2.csv")
+    assert main(["posterior", other, *argv[2:], "--steps", "5", "--resume", "--quiet"]) == 2
+    assert "run with other recordings" in capsys.readouterr().err
+    assert main([*argv, "--steps", "5", "--resume", "--quiet", "--no-plots", "--json"]) == 0
+    js = json.loads(capsys.readouterr().out)
+    assert js["diagnostics"]["steps"] > 5
