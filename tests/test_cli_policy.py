@@ -153,33 +153,25 @@ sys.exit(main(sys.argv[1:]))
 """
 
 
-@pytest.mark.parametrize(
-    ("sig", "stage", "status", "said", "kept"),
-    [
-        (signal.SIGTERM, "fit.calibrate", 143, "interrupted (SIGTERM); nothing was written", False),
-        (
-            signal.SIGINT,
-            "plot.plot_calibration",
-            130,
-            "interrupted (SIGINT); kept (complete)",
-            True,
-        ),
-    ],
-    ids=["sigterm-before-writing", "sigint-after-the-record"],
-)
-def test_a_signal_stops_a_command_with_one_line(tree, sig, stage, status, said, kept):
+# (signal, command, the stage that waits, status, what the one line says, output kept)
+SIGNALS = [
+    (signal.SIGTERM, "calibrate", "fit.calibrate", 143, "nothing was written", False),
+    (signal.SIGINT, "simulate", "plot.plot_signal_and_spectrum", 130, "kept (complete)", True),
+]
+
+
+@pytest.mark.parametrize(("sig", "command", "stage", "status", "said", "kept"), SIGNALS,
+                         ids=["sigterm-before-writing", "sigint-after-the-csv"])  # fmt: skip
+def test_a_signal_stops_a_command_with_one_line(tree, sig, command, stage, status, said, kept):
     module, name = stage.split(".")
-    out, png = tree / "cal.toml", tree / "cal.png"
-    if not kept:  # the fit itself waits: a real fit result is not needed
-        argv = ["calibrate", str(tree / "rec.csv"), "--whisker", PAPER, "--out", str(out)]
-    else:
-        argv = ["calibrate", str(tree / "rec.csv"), "--whisker", PAPER, "--out", str(out),
-                "--plot", str(png)]  # fmt: skip
-    child = subprocess.Popen(
-        [sys.executable, "-c", textwrap.dedent(_CHILD.format(module=module, name=name)),
-         *argv, "--json"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
+    out, png = tree / "out.x", tree / "out.png"
+    argv = {
+        "calibrate": ["calibrate", str(tree / "rec.csv"), "--whisker", PAPER],
+        "simulate": ["simulate", "--duration", "0.5", "--plot", str(png)],
+    }[command] + ["--out", str(out), "--json"]
+    script = textwrap.dedent(_CHILD.format(module=module, name=name))
+    child = subprocess.Popen([sys.executable, "-c", script, *argv], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)  # fmt: skip
     lines = []
     for line in child.stderr:
         if line.strip() == "READY":
@@ -191,9 +183,9 @@ def test_a_signal_stops_a_command_with_one_line(tree, sig, stage, status, said, 
     stdout, rest = child.communicate(timeout=60)
     assert child.returncode == status
     assert stdout == "" and "Traceback" not in rest
-    assert rest.strip().splitlines() == [
-        f"whiskerid calibrate: {said}" + rest.split(said)[1].rstrip()
-    ]
+    name = signal.Signals(sig).name
+    assert len(rest.strip().splitlines()) == 1
+    assert rest.startswith(f"whiskerid {command}: interrupted ({name}); {said}")
     assert out.exists() == kept and not png.exists()
     assert not [p for p in tree.iterdir() if p.name.startswith(".")]  # no temporary file
 
