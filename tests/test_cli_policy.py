@@ -341,3 +341,25 @@ def test_posterior_stops_between_steps_and_resumes_only_on_the_same_data(tmp_pat
     assert main([*argv, "--steps", "5", "--resume", "--quiet", "--no-plots", "--json"]) == 0
     js = json.loads(capsys.readouterr().out)
     assert js["diagnostics"]["steps"] > 5
+
+
+def test_posterior_refuses_a_disk_too_full_for_its_chain(tree, capsys, monkeypatch):
+    import shutil
+    from collections import namedtuple
+
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage(10**9, 10**9 - 1000, 1000))
+    argv = ["posterior", str(tree / "rec.csv"), "--fit", PAPER, "--out", str(tree / "new")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "MB free" in err and not (tree / "new").exists()
+
+
+def test_posterior_resume_refuses_a_chain_that_does_not_say_its_data(tree, capsys):
+    h5py = pytest.importorskip("h5py")
+    chain = tree / "post" / "chain.h5"
+    with h5py.File(chain, "w") as f:
+        f.create_group("whiskerid")
+    argv = ["posterior", str(tree / "rec.csv"), "--fit", PAPER, "--out", str(tree / "post")]
+    assert main([*argv, "--resume"]) == 2
+    assert "does not say which data" in capsys.readouterr().err
