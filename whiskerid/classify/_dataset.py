@@ -13,7 +13,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import Recording, RecordingError, check_samples, read_recording
+from ..io import (
+    Recording,
+    RecordingError,
+    check_samples,
+    read_recording,
+    recording_rate,
+)
+from ..io import timestamp_rate as timestamp_rate  # the package re-exports it, as before
 
 RECORDING_SUFFIXES = (".csv", ".npz", ".npy")
 #: Fewest samples a window may hold: a spectrum of fewer bins says nothing of a terrain.
@@ -21,9 +28,6 @@ MIN_WINDOW = 16
 #: How far apart the rates of one dataset's recordings, or of a recording and the rate
 #: asked for, may be (one ADS1115's oscillator is good to a few per cent).
 RATE_TOLERANCE = 0.05
-#: How far ``rate_hz`` metadata and the timestamps may disagree (the ADS1115's rate is
-#: specified to ±10 %; a time column in ms is off by a factor of 1000).
-RATE_METADATA_TOLERANCE = 0.15
 #: Timestamp steps longer than this many median steps are gaps that windows never span.
 GAP_STEPS = 10.0
 
@@ -85,38 +89,6 @@ class WindowSet:
             idx = np.flatnonzero(self.recording == r)
             out[idx] = np.arange(idx.size) * self.windows.shape[-1] / self.rate_hz
         return out
-
-
-def timestamp_rate(t: np.ndarray) -> float:
-    """Sample rate from timestamps (Hz): one over the median step."""
-    return 1.0 / float(np.median(np.diff(np.asarray(t, dtype=float))))
-
-
-def recording_rate(rec: Recording) -> float:
-    """A recording's sample rate: its ``rate_hz`` metadata, else the median timestamp step.
-
-    Raises:
-        RecordingError: ``rate_hz`` is not a positive number, or disagrees with the
-            timestamps by more than :data:`RATE_METADATA_TOLERANCE` (time in ms or ns,
-            or the wrong rate written down: either would silently shift every spectrum).
-    """
-    src = rec.source or "recording"
-    stamped = timestamp_rate(rec.t)
-    if "rate_hz" not in rec.meta:
-        return stamped
-    try:
-        rate = float(rec.meta["rate_hz"])
-    except ValueError:
-        rate = float("nan")
-    if not (np.isfinite(rate) and rate > 0):
-        raise RecordingError(f"{src}: rate_hz {rec.meta['rate_hz']!r} is not a positive number")
-    if abs(stamped / rate - 1) > RATE_METADATA_TOLERANCE:
-        raise RecordingError(
-            f"{src}: rate_hz says {rate:g} Hz but the timestamps step by "
-            f"{1 / stamped:.4g} ({stamped:.4g} Hz): the time column must be in seconds "
-            "(convert it), or correct rate_hz"
-        )
-    return rate
 
 
 def check_rate(rec: Recording, rate_hz: float) -> float:

@@ -28,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._version import __version__
-from ..io import Recording, RecordingError
+from ..io import Recording, RecordingError, atomic_folder
 from ._context import check_context, fuse_context
 from ._dataset import (
     check_rate,
@@ -283,10 +283,10 @@ class ClassifierModel:
         path = Path(path)
         if path.exists() and not path.is_dir():
             raise ValueError(f"{path} is a file; a model is a folder: give a folder name")
-        path.mkdir(parents=True, exist_ok=True)
         arrays = {f"m{j}_{k}": a for j, n in enumerate(self.nets) for k, a in to_arrays(n).items()}
-        np.savez(path / MODEL_WEIGHTS, **arrays)
-        (path / MODEL_JSON).write_text(json.dumps(self.header(), indent=2) + "\n")
+        with atomic_folder(path) as tmp:  # the two files appear together or not at all
+            np.savez(tmp / MODEL_WEIGHTS, **arrays)
+            (tmp / MODEL_JSON).write_text(json.dumps(self.header(), indent=2) + "\n")
         return path
 
     @classmethod

@@ -4,7 +4,7 @@ import argparse
 from pathlib import Path
 
 from .._choices import EXCITATIONS, OBSERVABLES, PINS, SOLVERS
-from ._common import HelpFormatter
+from ._common import FORCE_HELP, HelpFormatter, check_outputs
 
 
 def add_calibrate(sub, command_error) -> None:
@@ -43,12 +43,21 @@ def add_calibrate(sub, command_error) -> None:
         help="least-squares solver (optimistix)",
     )
     p.add_argument("--plot", type=Path, help="save data, fit and residuals as this PNG")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
-    p.set_defaults(func=lambda args: _cmd_calibrate(args, command_error))
+    p.set_defaults(func=lambda args: _cmd_calibrate(args, command_error, p))
+
+
+#: The options of :func:`add_data_options` that a fit record keeps (``[fit.options]``), so
+#: that ``posterior`` reads the recordings as the fit did.
+DATA_OPTIONS = (
+    *("observable", "time_col", "signal_col", "scale", "units_g", "excitation", "fb", "hb"),
+    *("base_col", "sensor_x", "fit_gain", "gain_known", "t_start", "t_end"),
+)
 
 
 def add_data_options(p: argparse.ArgumentParser) -> None:
-    """What the recordings hold and which part to use: the options :func:`load_observation`
+    """What the recordings hold and which part to use: the options :func:`load_observations`
     reads (shared by ``calibrate`` and ``posterior``)."""
     p.add_argument(
         "--observable",
@@ -115,11 +124,10 @@ def _check_sampling(rec, record) -> None:
     """Refuse ``rate_hz`` metadata at odds with the timestamps, and sampling far too slow
     for the whisker's first mode (a time column in ms read as seconds is 1000 times too
     slow): a fit to either would end with numbers, all of them wrong."""
-    from ..classify import recording_rate, timestamp_rate
-    from ..io import RecordingError
+    from ..io import RecordingError, recording_rate, timestamp_rate
 
     recording_rate(rec)
-    rate = timestamp_rate(rec.t)
+    rate = timestamp_rate(rec.t, where=str(rec.source))
     f1 = float(record.whisker().natural_frequencies_hz[0])
     if f1 > 5 * rate:
         raise RecordingError(
@@ -156,17 +164,14 @@ def load_observations(path: Path, record, args) -> list:
     )
 
 
-def _cmd_calibrate(args, command_error) -> dict:
+def _cmd_calibrate(args, command_error, parser) -> dict:
     import sys
 
     from ..fit import calibrate, read_static_test
-    from ..io import check_out_path
     from ..model import load_record
 
     inputs = {"REC": args.recordings, "--whisker": args.whisker, "--static": args.static}
-    check_out_path(args.out, "--out", inputs=inputs)
-    if args.plot is not None:
-        check_out_path(args.plot, "--plot", inputs={**inputs, "--out": args.out})
+    check_outputs({"--out": args.out, "--plot": args.plot}, inputs, force=args.force)
     check_data_options(args)
     record = load_record(args.whisker)
     obs = [o for p in args.recordings for o in load_observations(p, record, args)]
@@ -180,7 +185,7 @@ def _cmd_calibrate(args, command_error) -> dict:
         pin=args.pin,
         solver=args.solver,
     )
-    cal.record.save(args.out)
+    _with_options(cal.record, args, parser).save(args.out)
     print(cal.report(), file=sys.stderr)
     print(f"wrote {args.out}", file=sys.stderr)
     out = {**cal.to_json(), "out": str(args.out)}
@@ -196,3 +201,13 @@ def _cmd_calibrate(args, command_error) -> dict:
             file=sys.stderr,
         )
     return out
+
+
+def _with_options(record, args, parser):
+    """The fit record with the data options given in its ``[fit.options]`` table."""
+    options = {d: getattr(args, d) for d in DATA_OPTIONS
+               if getattr(args, d) != parser.get_default(d)}  # fmt: skip
+    fit = record.extra.get("fit")
+    if fit is None or not options:
+        return record
+    return record.replace(extra={**record.extra, "fit": {**fit, "options": options}})

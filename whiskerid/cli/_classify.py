@@ -2,7 +2,16 @@
 
 from pathlib import Path
 
-from ._common import CONTEXT_HELP, CommandError, HelpFormatter, load_model, say
+from ._common import (
+    CONTEXT_HELP,
+    FORCE_HELP,
+    CommandError,
+    HelpFormatter,
+    check_outputs,
+    load_model,
+    model_folder,
+    say,
+)
 
 
 def add_parser(sub) -> None:
@@ -20,17 +29,19 @@ def add_parser(sub) -> None:
                    help="save the signal and its labels over time as this PNG")  # fmt: skip
     c.add_argument("--context", type=float, metavar="S",
                    help=CONTEXT_HELP + "; the model's by default")  # fmt: skip
+    c.add_argument("--force", action="store_true", help=FORCE_HELP)
     c.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     c.set_defaults(func=run)
 
 
 def run(args) -> dict:
     """Label the recording (and plot its labels); returns the JSON summary."""
-    from ..io import check_out_path, read_recording
+    from ..io import read_recording
 
     _check_order(args.model, args.recording)
-    if args.plot is not None:  # before any work
-        check_out_path(args.plot, "--plot", inputs={"MODEL": args.model, "REC": args.recording})
+    check_outputs({"--plot": args.plot},
+                  {"MODEL": model_folder(args.model), "REC": args.recording},
+                  force=args.force)  # fmt: skip
     model = load_model(args.model, args.context)
     rec = read_recording(args.recording)
     res = model.classify_recording(rec, speed=args.speed)

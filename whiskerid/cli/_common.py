@@ -15,10 +15,11 @@ class CommandError(Exception):
 
 
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
-    """Shows each option's default, except where there is none to show (``None``)."""
+    """Shows each option's default, except where there is none to show (``None``, a flag's
+    ``False``, or a required option)."""
 
     def _get_help_string(self, action: argparse.Action) -> str | None:
-        if action.default is None:
+        if action.default is None or action.default is False or action.required:
             return action.help
         return super()._get_help_string(action)
 
@@ -77,3 +78,274 @@ def json_safe(value):
 def one_line(err: BaseException) -> str:
     """The error's message on one line (its type's name if it has none)."""
     return " ".join(str(err).split()) or type(err).__name__
+
+
+# --------------------------------------------------------------------------- output policy
+#: The sentence each writing command's ``--force`` help starts with.
+FORCE_HELP = (
+    "replace outputs that already exist (without it an existing output is refused); an output "
+    "that is, or lies inside, one of the command's inputs is refused even with --force"
+)
+
+
+class _Watch:
+    """The outputs of the running command, so that an interrupt can say what was written."""
+
+    def __init__(self) -> None:
+        self.outputs: list[Path] = []
+        self.start_ns = 0
+        self.notes: list = []  # callables returning a sentence (or None) for the report
+
+    def reset(self) -> None:
+        import time
+
+        self.outputs, self.notes, self.start_ns = [], [], time.time_ns()
+
+    def written(self) -> list[str]:
+        """The outputs written (or changed) since the command started, as short phrases."""
+        done = []
+        for p in self.outputs:
+            if p.is_file() and p.stat().st_mtime_ns >= self.start_ns:
+                done.append(str(p))
+            elif p.is_dir():
+                new = sum(
+                    1 for f in p.rglob("*") if f.is_file() and f.stat().st_mtime_ns >= self.start_ns
+                )
+                if new:
+                    done.append(f"{new} file(s) under {p}")
+        return done
+
+
+WATCH = _Watch()
+
+
+def _as_list(given) -> list[Path]:
+    if given is None:
+        return []
+    return [Path(p) for p in (given if isinstance(given, list | tuple) else [given])]
+
+
+def _within(inner: Path, outer: Path) -> bool:
+    """Whether ``inner`` is ``outer`` or lies inside it (through links too)."""
+    from ..io import same_file
+
+    if same_file(inner, outer):
+        return True
+    try:
+        a, b = inner.resolve(), outer.resolve()
+    except OSError:
+        return False
+    return b in a.parents
+
+
+def model_folder(path: Path) -> Path:
+    """The folder of a model given as its folder or as its ``model.json``."""
+    path = Path(path)
+    return path.parent if path.is_file() and path.name == "model.json" else path
+
+
+def check_outputs(
+    outputs: dict[str, Path | None],
+    inputs: dict[str, Path | list | None],
+    *,
+    force: bool,
+    folders: tuple[str, ...] = (),
+    exists_hint: str = "pass --force to replace it",
+    min_free_bytes: int = 0,
+) -> None:
+    """The one output policy of every command that writes; call it before any work.
+
+    Refused, with a one-line reason:
+
+    - an output that is, or lies inside, anything the command reads or may be asked to
+      read (a recording, a record, a model folder, a dataset tree, a chain), even with
+      ``force``: writing it would destroy what the command needs;
+    - an input that lies inside a folder output (the folder would be replaced);
+    - an output that already exists (a folder output: one that is not empty), unless
+      ``force``;
+    - two outputs that are the same file;
+    - an output whose folder cannot be written, or a file where a folder is needed (and
+      the other way round), or less free space than ``min_free_bytes``.
+
+    The outputs are remembered, so that an interrupted command can say what it kept.
+
+    Args:
+        outputs: Option name → path to write (None for an option not given).
+        inputs: Option name → path(s) read: files or folders (None for one not given).
+        force: Whether existing outputs may be replaced.
+        folders: The names in ``outputs`` that are folders.
+        exists_hint: What to do about an existing output, for the message.
+        min_free_bytes: Free space the outputs need at least.
+
+    Raises:
+        CommandError: What is wrong and what to do.
+    """
+    given = {flag: Path(p) for flag, p in outputs.items() if p is not None}
+    for flag, out in given.items():
+        for name, value in inputs.items():
+            for src in _as_list(value):
+                if _within(out, src):
+                    what = "is also" if _within(src, out) else "lies inside"
+                    raise CommandError(
+                        f"{flag} {out} {what} the input {name} {src}: it would be overwritten, "
+                        "destroying what this command reads (even with --force); give another path"
+                    )
+                if flag in folders and _within(src, out):
+                    raise CommandError(
+                        f"the input {name} {src} lies inside the output folder {flag} {out}; "
+                        "give another folder"
+                    )
+    seen: dict[Path, str] = {}
+    for flag, out in given.items():
+        key = out.resolve()
+        if key in seen:
+            raise CommandError(f"{flag} and {seen[key]} are the same path {out}; give two")
+        seen[key] = flag
+        _check_one(flag, out, is_folder=flag in folders, force=force, hint=exists_hint)
+        if min_free_bytes:
+            _check_space(flag, out, min_free_bytes)
+    WATCH.outputs.extend(given.values())
+
+
+def _check_one(flag: str, out: Path, *, is_folder: bool, force: bool, hint: str) -> None:
+    import os
+
+    if is_folder:
+        if out.exists() and not out.is_dir():
+            raise CommandError(f"{flag} {out} is a file; give a folder")
+        if out.is_dir() and any(out.iterdir()) and not force:
+            raise CommandError(f"{flag} {out} already exists and is not empty; {hint}")
+    else:
+        if out.is_dir():
+            raise CommandError(f"{flag} {out} is a folder; give a file name")
+        if out.exists() and not force:
+            raise CommandError(f"{flag} {out} already exists; {hint}")
+    parent = next((p for p in [out, *out.parents] if p.exists()), Path("."))
+    if parent != out and not parent.is_dir():
+        raise CommandError(f"{flag} {out}: {parent} is a file, not a folder")
+    if not os.access(parent if parent.is_dir() else parent.parent, os.W_OK | os.X_OK):
+        raise CommandError(f"{flag} {out}: {parent} cannot be written (no permission)")
+
+
+def _check_space(flag: str, out: Path, need: int) -> None:
+    import shutil
+
+    parent = next((p for p in [out, *out.parents] if p.exists()), Path("."))
+    free = shutil.disk_usage(parent).free
+    if free < need:
+        raise CommandError(
+            f"{flag} {out}: {free / 1e6:.3g} MB free, and the output needs about "
+            f"{need / 1e6:.3g} MB; free some space or choose another place"
+        )
+
+
+# --------------------------------------------------------------------------- interrupts
+class Interrupted(KeyboardInterrupt):
+    """SIGINT or SIGTERM arrived (a KeyboardInterrupt, so loops that stop on Ctrl-C stop)."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+class InterruptPolicy:
+    """SIGINT and SIGTERM: stop, say in one line what was kept, exit 128 + the signal.
+
+    By default a signal raises :class:`Interrupted` at once. Inside :meth:`deferred`, the
+    first signal only sets :attr:`requested` (the code polls :meth:`stop_requested` at a safe
+    point, such as between two MCMC steps, and stops there); a second one raises at once.
+    """
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+        self.requested = False
+        self._defer = False
+        self._previous: dict = {}
+
+    def __enter__(self) -> "InterruptPolicy":
+        import signal
+        import threading
+
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._previous[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        import signal
+
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+        self._previous = {}
+
+    def _handle(self, signum, frame) -> None:
+        first = self.signum is None
+        self.signum = signum
+        if self._defer and first:
+            self.requested = True
+            say("stopping after the current step (send the signal again to stop at once)")
+            return
+        raise Interrupted(signum)
+
+    def stop_requested(self) -> bool:
+        """Whether a signal asked to stop (polled by code that stops at safe points)."""
+        return self.requested
+
+    def deferred(self):
+        """A context in which the first signal is only recorded, not raised."""
+        import contextlib
+
+        @contextlib.contextmanager
+        def ctx():
+            self._defer = True
+            try:
+                yield self
+            finally:
+                self._defer = False
+
+        return ctx()
+
+    def status(self, err: BaseException) -> int:
+        """The exit status for the interrupt ``err``: 130 for SIGINT, 143 for SIGTERM."""
+        import signal
+
+        signum = getattr(err, "signum", None) or self.signum or signal.SIGINT
+        return 128 + int(signum)
+
+    def report(self, err: BaseException) -> str:
+        """One line: which signal, and what was kept (or that nothing was written)."""
+        import signal
+
+        signum = getattr(err, "signum", None) or self.signum or signal.SIGINT
+        name = signal.Signals(signum).name
+        notes = [n for n in (note() for note in WATCH.notes) if n]
+        kept = WATCH.written()
+        what = "; ".join(notes) if notes else (
+            f"kept (complete): {', '.join(kept)}" if kept else "nothing was written"
+        )  # fmt: skip
+        return f"interrupted ({name}); {what}"
+
+
+_POLICY = InterruptPolicy()
+
+
+def start_command() -> InterruptPolicy:
+    """A fresh interrupt policy and output watch for a command about to run."""
+    global _POLICY
+    WATCH.reset()
+    _POLICY = InterruptPolicy()
+    return _POLICY
+
+
+def interrupts() -> InterruptPolicy:
+    """The running command's interrupt policy."""
+    return _POLICY
+
+
+# --------------------------------------------------------------------------- progress
+QUIET_HELP = "no progress bar (progress bars go to stderr, also with --json)"
+
+
+def show_progress(args) -> bool:
+    """The one progress policy: bars on stderr unless ``--quiet``, whatever stdout carries."""
+    return not getattr(args, "quiet", False)

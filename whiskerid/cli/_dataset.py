@@ -3,7 +3,7 @@
 from pathlib import Path
 
 from .._choices import SPEEDS_MPS, TERRAINS
-from ._common import CommandError, HelpFormatter, record_or_paper, say
+from ._common import FORCE_HELP, CommandError, HelpFormatter, check_outputs, record_or_paper, say
 
 
 def add_parser(sub) -> None:
@@ -37,6 +37,9 @@ def add_parser(sub) -> None:
         default=0,
         help="dataset seed: with terrain, speed and run number, it fixes each recording",
     )
+    s.add_argument("--force", action="store_true",
+                   help=FORCE_HELP + "; only recordings this simulator wrote are replaced, a "
+                   "folder holding other recordings is refused")  # fmt: skip
     s.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     s.set_defaults(func=run)
 
@@ -45,12 +48,17 @@ def run(args) -> dict:
     """Synthesise the recordings; returns the JSON summary."""
     from ..terrain import synthesize_dataset
 
+    # A folder holding recordings is refused by the simulator itself (with --force, it
+    # replaces only its own recordings), so here: no output inside an input, a writable place.
+    check_outputs({"--out": args.out}, {"--whisker": args.whisker}, force=True,
+                  folders=("--out",))  # fmt: skip
     if args.runs < 1 or args.duration <= 0:
         raise CommandError("--runs must be >= 1 and --duration > 0")
     record = record_or_paper(args.whisker)
     paths = synthesize_dataset(args.out, record=record, terrains=tuple(args.terrains),
                                speeds=tuple(args.speeds), runs=args.runs,
-                               duration_s=args.duration, seed=args.seed)  # fmt: skip
+                               duration_s=args.duration, seed=args.seed,
+                               replace_synthetic=args.force)  # fmt: skip
     say(f"wrote {len(paths)} recordings to {args.out}")
     return {"out": str(args.out), "recordings": len(paths), "terrains": args.terrains,
             "speeds_mps": args.speeds, "runs": args.runs, "duration_s": args.duration}  # fmt: skip

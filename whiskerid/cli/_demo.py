@@ -2,7 +2,7 @@
 
 from pathlib import Path
 
-from ._common import HelpFormatter, say
+from ._common import FORCE_HELP, HelpFormatter, check_outputs, say
 
 
 def add_parser(sub) -> None:
@@ -24,12 +24,14 @@ def add_parser(sub) -> None:
     )
     p.add_argument("--out", type=Path, default=Path("whiskerid-demo"), help="output folder")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.set_defaults(func=run)
 
 
 def run(args) -> dict:
     """Run every stage of the demo; returns its JSON summary."""
+    check_outputs({"--out": args.out}, {}, force=args.force, folders=("--out",))
     from ._demo_stages import run_demo
 
     return run_demo(args.out, plots=not args.no_plots, say=say)

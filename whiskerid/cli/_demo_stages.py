@@ -21,6 +21,7 @@ import numpy as np
 from ..fit import dominant_peaks
 from ..io import write_csv
 from ..model import harmonic_steady_state, observe, paper_eq1, paper_record, simulate
+from ._common import interrupts
 
 MODAL_CASES = [(hb, fb) for fb in (100.0, 300.0) for hb in (1e-4, 3e-4)]
 
@@ -164,7 +165,11 @@ def _posterior_stage(out: Path, record, obs, *, plots: bool, say) -> dict:
     say("[5] posterior of zeta with emcee: the calibrated pluck, 32 walkers x 1000 steps")
     # 1000 steps: tau is about 11 steps here with the default (differential-evolution)
     # move, and 50 tau is the convergence criterion.
-    post = sample_posterior(record, obs, walkers=32, steps=1000, seed=0)
+    # A signal stops the run between two steps (never inside emcee's log-probability).
+    with interrupts().deferred() as policy:
+        post = sample_posterior(
+            record, obs, walkers=32, steps=1000, seed=0, stop=policy.stop_requested
+        )
     z, f = post.params["zeta"], post.params["f1_hz"]
     d = post.diagnostics
     say(

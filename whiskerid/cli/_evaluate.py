@@ -2,7 +2,16 @@
 
 from pathlib import Path
 
-from ._common import CONTEXT_HELP, CommandError, HelpFormatter, load_model, say
+from ._common import (
+    CONTEXT_HELP,
+    FORCE_HELP,
+    CommandError,
+    HelpFormatter,
+    check_outputs,
+    load_model,
+    model_folder,
+    say,
+)
 
 #: Recordings labelled wrong that ``evaluate`` names on stderr (all of them are in --json).
 _SHOW_WRONG = 10
@@ -24,6 +33,7 @@ def add_parser(sub) -> None:
     e.add_argument("--plot", type=Path, help="save the confusion matrix as this PNG")
     e.add_argument("--context", type=float, metavar="S",
                    help=CONTEXT_HELP + "; the model's by default")  # fmt: skip
+    e.add_argument("--force", action="store_true", help=FORCE_HELP)
     e.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     e.set_defaults(func=run)
 
@@ -32,11 +42,11 @@ def run(args) -> dict:
     """Score the model and print its confusion matrix; returns the JSON summary."""
     from ..classify import evaluate_classifier as evaluate
     from ..classify import format_confusion, load_dataset
-    from ..io import check_out_path
     from ..plot import plot_confusion
 
-    if args.plot is not None:  # before any work
-        check_out_path(args.plot, "--plot", inputs={"MODEL": args.model, "DATASET": args.dataset})
+    check_outputs({"--plot": args.plot},
+                  {"MODEL": model_folder(args.model), "DATASET": args.dataset},
+                  force=args.force)  # fmt: skip
     model = load_model(args.model, args.context)
     ws = load_dataset(args.dataset, channel=model.channel, window_s=model.window / model.rate_hz,
                       rate_hz=model.rate_hz, labels=model.labels)  # fmt: skip

@@ -1,7 +1,9 @@
 """The ``whiskerid`` command line: the parser, the entry point, errors and JSON output.
 
 Every command has ``--help``; ``--json`` prints one JSON object on stdout while human text
-goes to stderr; the exit status is 0 on success and 2 with a one-line reason on bad input.
+and progress bars go to stderr; the exit status is 0 on success, 2 with a one-line reason on
+bad input, and 130 (SIGINT, Ctrl-C) or 143 (SIGTERM) with one line saying what was kept
+when a signal stops the command.
 Each command is one module of this package (options, and a ``run`` function that calls the
 library and prints). Building the parser imports no part of the library, so that ``--help``
 answers without starting JAX: the run functions import what they use.
@@ -25,7 +27,7 @@ from . import (
     _train,
 )
 from ._cache import enable_compile_cache
-from ._common import CommandError, json_safe, one_line
+from ._common import CommandError, json_safe, one_line, start_command
 
 # Reported on one line with exit status 2. The library's own errors (RecordError,
 # RecordingError, CalibrationError, ModelError, PosteriorError) are ValueErrors. The readers
@@ -88,21 +90,23 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     enable_compile_cache()
     start = time.perf_counter()
-    try:
-        result = args.func(args)
-    except _EXPECTED as err:
-        print(f"whiskerid {args.command}: error: {one_line(err)}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print(f"whiskerid {args.command}: interrupted", file=sys.stderr)
-        return 130
-    if getattr(args, "json", False):
-        result = {
-            "command": args.command,
-            **result,
-            "elapsed_s": round(time.perf_counter() - start, 3),
-        }
-        print(json.dumps(json_safe(result), indent=2, allow_nan=False))
+    with start_command() as policy:
+        try:
+            result = args.func(args)
+        except _EXPECTED as err:
+            print(f"whiskerid {args.command}: error: {one_line(err)}", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt as err:
+            # One line, no traceback: what was kept, or that nothing was written.
+            print(f"whiskerid {args.command}: {policy.report(err)}", file=sys.stderr)
+            return policy.status(err)
+        if getattr(args, "json", False):
+            result = {
+                "command": args.command,
+                **result,
+                "elapsed_s": round(time.perf_counter() - start, 3),
+            }
+            print(json.dumps(json_safe(result), indent=2, allow_nan=False))
     return 0
 
 

@@ -5,8 +5,17 @@ import sys
 from pathlib import Path
 
 from .._choices import LIKELIHOODS, MOVES, PINS
-from ._calibrate import add_data_options, check_data_options, load_observations
-from ._common import HelpFormatter
+from ._calibrate import DATA_OPTIONS, add_data_options, check_data_options, load_observations
+from ._common import (
+    QUIET_HELP,
+    WATCH,
+    HelpFormatter,
+    check_outputs,
+    interrupts,
+    one_line,
+    say,
+    show_progress,
+)
 
 
 def add_posterior(sub, command_error) -> None:
@@ -49,56 +58,90 @@ def add_posterior(sub, command_error) -> None:
         "--nu degrees of freedom, nuisances sampled)",
     )
     p.add_argument("--nu", type=float, default=4.0, help="Student-t degrees of freedom")
-    p.add_argument("--resume", action="store_true", help="continue DIR/chain.h5 by --steps")
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue DIR/chain.h5 by --steps (the same recordings and settings only; the "
+        "summary and plots in DIR are replaced)",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="replace what DIR holds (a chain included) and start afresh; without it or "
+        "--resume an existing output is refused; an output that is one of the inputs is "
+        "refused even with --force",
+    )
     p.add_argument("--no-plots", action="store_true", help="skip the corner and trace PNGs")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    # Data options, as in `whiskerid calibrate` (read by its load_observations).
+    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
+    # Data options, as in `whiskerid calibrate` (read by its load_observations); those not
+    # given are taken from the fit record's [fit.options] table.
     add_data_options(p)
     p.add_argument("--pin", choices=PINS, default="auto", help="auto: the fit's pin")
     p.add_argument("--modes", type=int, help="modes in the model (the fit's by default)")
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
-    p.set_defaults(func=lambda args: _cmd_posterior(args, command_error))
+    p.set_defaults(func=lambda args: _cmd_posterior(args, command_error, p))
 
 
-def _cmd_posterior(args, command_error) -> dict:
+#: What ``posterior`` writes into its --out folder.
+OUTPUTS = ("posterior.toml", "chain.h5", "corner.png", "trace.png")
+
+#: Samples (all recordings together) above which a note says how to use fewer.
+MANY_SAMPLES = 20_000
+
+
+def _cmd_posterior(args, command_error, parser) -> dict:
     import numpy as np
 
     from ..fit import read_static_test
     from ..model import load_record
     from ..posterior import sample_posterior
 
-    if args.out.exists() and not args.out.is_dir():
-        raise command_error(f"--out {args.out} is a file; give a folder")
     if args.walkers < 2 or args.steps < 1:
         raise command_error("--walkers must be >= 2 and --steps >= 1")
     if not (np.isfinite(args.nu) and args.nu > 0):
         raise command_error(f"--nu {args.nu!r} must be a positive number")
+    if args.resume and args.force:
+        raise command_error("--resume continues the chain and --force replaces it: give one")
+    chain = args.out / "chain.h5"
+    _check_out(args, command_error, chain)
     check_data_options(args)
-    _check_inputs_survive(args, command_error)
 
     record = load_record(args.fit)
+    used = fit_options(args, parser, record)
     obs = [o for p in args.recordings for o in load_observations(p, record, args)]
+    _note_data_size(obs, record, args)
     static = read_static_test(args.static) if args.static else None
+    settings = _settings(args, used)
+    if args.resume:
+        _check_same_run(chain, settings, command_error)
     args.out.mkdir(parents=True, exist_ok=True)
-    chain = args.out / "chain.h5"
-    if args.resume and not chain.exists():
-        raise command_error(f"--resume: no chain at {chain}")
-    post = sample_posterior(
-        record,
-        obs,
-        walkers=args.walkers,
-        steps=args.steps,
-        seed=args.seed,
-        backend=chain,
-        resume=args.resume,
-        progress=not (args.quiet or args.json),
-        move=args.move,
-        static=static,
-        n_modes=args.modes,
-        pin=args.pin,
-        likelihood=args.likelihood,
-        nu=args.nu,
-    )
+    if not args.resume:
+        chain.unlink(missing_ok=True)  # --force: start afresh
+        _store_settings(chain, settings, command_error)
+    policy = interrupts()
+    WATCH.notes.append(lambda: _chain_note(chain))
+    try:
+        with policy.deferred():
+            post = sample_posterior(
+                record,
+                obs,
+                walkers=args.walkers,
+                steps=args.steps,
+                seed=args.seed,
+                backend=chain,
+                resume=args.resume,
+                progress=show_progress(args),
+                move=args.move,
+                static=static,
+                n_modes=args.modes,
+                pin=args.pin,
+                likelihood=args.likelihood,
+                nu=args.nu,
+                stop=policy.stop_requested,
+            )
+    except OSError as err:
+        raise command_error(f"could not write the chain {chain}: {one_line(err)}") from None
+    WATCH.notes.clear()
     out_toml = post.record.save(args.out / "posterior.toml")
     d = post.diagnostics
     for name in ("f1_hz", "zeta", "kappa", "EI", "C"):
@@ -107,7 +150,7 @@ def _cmd_posterior(args, command_error) -> dict:
             print(f"{name} = {interval_text(q)}, tau {q['tau']:.3g}, ESS {q['ess']:.4g}",
                   file=sys.stderr)  # fmt: skip
     print(f"acceptance {d['acceptance']:.3f}; {d['message']}", file=sys.stderr)
-    out = {**post.to_json(), "out": str(out_toml), "chain": str(chain)}
+    out = {**post.to_json(), "out": str(out_toml), "chain": str(chain), "options": used}
     if not args.no_plots:
         from ..plot import plot_corner, plot_trace
 
@@ -117,22 +160,150 @@ def _cmd_posterior(args, command_error) -> dict:
     return out
 
 
-#: What ``posterior`` writes into its --out folder.
-OUTPUTS = ("posterior.toml", "chain.h5", "corner.png", "trace.png")
+def _check_out(args, command_error, chain: Path) -> None:
+    """The output policy: refuse outputs over inputs, an existing chain without --resume or
+    --force, --resume without a chain, and too little space for the chain."""
+    if args.out.exists() and not args.out.is_dir():
+        raise command_error(f"--out {args.out} is a file; give a folder")
+    if args.resume and not chain.is_file():
+        raise command_error(f"--resume: no chain at {chain}; leave --resume out to start one")
+    inputs = {"REC": args.recordings, "--fit": args.fit, "--static": args.static}
+    names = [n for n in OUTPUTS if not (args.resume and n == "chain.h5")]
+    # Per walker and step: the parameters (a few shared, a few per recording), the
+    # log-probability and emcee's bookkeeping, as float64; twice over for HDF5's chunks.
+    per_step = args.walkers * (8 + 4 * len(args.recordings)) * 8 * 2
+    for n in names:
+        check_outputs(
+            {"--out": args.out / n},
+            inputs,
+            force=args.force or args.resume,
+            exists_hint="pass --resume to continue the chain there, or --force to replace it",
+            min_free_bytes=per_step * args.steps + (1 << 20),
+        )
 
 
-def _check_inputs_survive(args, command_error) -> None:
-    """Refuse inputs that are among the files written into --out (they would be replaced)."""
-    from ..io import same_file
+def fit_options(args, parser, record) -> dict:
+    """Fill the data options not given with those the fit used (its ``[fit.options]``).
 
-    inputs = [*args.recordings, args.fit, args.static]
-    for name in OUTPUTS:
-        for p in inputs:
-            if p is not None and same_file(args.out / name, p):
-                raise command_error(
-                    f"input {p} would be overwritten by the output {args.out / name}; "
-                    "give another --out folder"
-                )
+    Returns:
+        The data options in force, as option name → value (those at their default left out).
+    """
+    stored = record.extra.get("fit", {}).get("options", {})
+    used, taken = {}, []
+    for dest in DATA_OPTIONS:
+        value = getattr(args, dest)
+        if value == parser.get_default(dest) and dest in stored:
+            value = stored[dest]
+            setattr(args, dest, value)
+            taken.append(f"--{dest.replace('_', '-')} {value}")
+        if value != parser.get_default(dest):
+            used[dest] = value
+    if taken:
+        say(f"data options from the fit record: {', '.join(taken)}")
+    return used
+
+
+def _settings(args, used: dict) -> dict:
+    """What a resumed chain must share with the run that started it."""
+    from ..fit import sha256_of
+
+    files = [*args.recordings, args.fit] + ([args.static] if args.static else [])
+    return {
+        "data": [{"name": Path(f).name, "sha256": sha256_of(f)} for f in files],
+        "options": {k: used[k] for k in sorted(used)},
+        "model": {
+            "likelihood": args.likelihood,
+            "nu": args.nu,
+            "pin": args.pin,
+            "modes": args.modes,
+            "walkers": args.walkers,
+        },
+    }
+
+
+_SETTINGS_KEY = "whiskerid_settings"
+
+
+def _store_settings(chain: Path, settings: dict, command_error) -> None:
+    import json
+
+    try:
+        import h5py
+    except ImportError:
+        raise command_error("posterior's chain file needs h5py (pip install h5py)") from None
+    try:
+        with h5py.File(chain, "a") as f:
+            f.attrs[_SETTINGS_KEY] = json.dumps(settings, sort_keys=True)
+    except OSError as err:
+        raise command_error(f"could not write the chain {chain}: {one_line(err)}") from None
+
+
+def _check_same_run(chain: Path, settings: dict, command_error) -> None:
+    """Refuse to continue a chain on other data or under other settings."""
+    import json
+
+    import h5py
+
+    with h5py.File(chain, "r") as f:
+        stored = f.attrs.get(_SETTINGS_KEY)
+    if stored is None:
+        raise command_error(f"--resume: {chain} does not say which data it was run on; "
+                            "start afresh with --force")  # fmt: skip
+    old = json.loads(stored)
+    for part, what in (("data", "recordings or fit record"), ("options", "data options"),
+                       ("model", "model settings")):  # fmt: skip
+        if old.get(part) != settings[part]:
+            raise command_error(
+                f"--resume: {chain} was run with other {what} "
+                f"({_diff(old.get(part), settings[part])}); resume with the same ones, or "
+                "start afresh with --force or another --out"
+            )
+
+
+def _diff(old, new) -> str:
+    if isinstance(old, list) and isinstance(new, list):
+        a = [f"{d['name']} {d['sha256'][:8]}" for d in old]
+        b = [f"{d['name']} {d['sha256'][:8]}" for d in new]
+        return f"then {', '.join(a)}; now {', '.join(b)}"
+    keys = sorted(set(old or {}) | set(new))
+    return "; ".join(
+        f"{k}: then {(old or {}).get(k)}, now {new.get(k)}"
+        for k in keys
+        if (old or {}).get(k) != new.get(k)
+    )
+
+
+def _chain_note(chain: Path) -> str | None:
+    """What an interrupted run kept: the chain, resumable."""
+    try:
+        import h5py
+
+        with h5py.File(chain, "r") as f:
+            steps = int(f["whiskerid"].attrs["iteration"])
+    except (OSError, KeyError, ImportError):
+        return None
+    if steps == 0:
+        return f"no step was finished; {chain} holds no samples"
+    return f"kept {chain} with {steps} finished steps: continue it with --resume"
+
+
+def _note_data_size(obs, record, args) -> None:
+    """Say before minutes of sampling how much data each step reads, and how to use less."""
+    n = sum(int(o.t.size) for o in obs)
+    if n <= MANY_SAMPLES:
+        return
+    import math
+
+    f1 = float(record.whisker().natural_frequencies_hz[0])
+    tau = 1.0 / (2 * math.pi * f1 * max(float(record.zeta), 1e-6))
+    end = max(float(o.t[0]) for o in obs) + math.log(100.0) * tau
+    hint = (f"the decay falls to 1 % about {math.log(100.0) * tau:.3g} s after its release "
+            f"(the fit's f1 and zeta): --t-end {end:.4g} keeps that much")  # fmt: skip
+    if args.t_end is not None:
+        hint = "a shorter --t-end uses less"
+    say(f"note: {n} samples in {len(obs)} recording(s) from the release on; each of the "
+        f"{args.walkers * args.steps} log-probability evaluations reads them all, which can "
+        f"take minutes; {hint}; or run fewer --steps and --resume later")  # fmt: skip
 
 
 def interval_text(q: dict) -> str:

@@ -3,7 +3,7 @@
 from pathlib import Path
 
 from .._choices import EXCITATIONS, MODELS, OBSERVABLES, UNITS
-from ._common import CommandError, HelpFormatter, record_or_paper, say
+from ._common import FORCE_HELP, CommandError, HelpFormatter, check_outputs, record_or_paper, say
 
 
 def add_parser(sub) -> None:
@@ -71,6 +71,7 @@ def add_parser(sub) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed for noise and jitter")
     p.add_argument("--out", type=Path, required=True, help="CSV file to write")
     p.add_argument("--plot", type=Path, help="also save signal and spectrum as this PNG")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.set_defaults(func=run)
 
@@ -79,13 +80,11 @@ def run(args) -> dict:
     """Simulate, write the CSV (and the plot); returns the JSON summary."""
     import numpy as np
 
-    from ..io import check_out_path, write_csv
+    from ..io import write_csv
     from ..model import simulate
 
-    inputs = {"--whisker": args.whisker, "--base": args.base}
-    check_out_path(args.out, "--out", inputs=inputs)
-    if args.plot is not None:
-        check_out_path(args.plot, "--plot", inputs={**inputs, "--out": args.out})
+    check_outputs({"--out": args.out, "--plot": args.plot},
+                  {"--whisker": args.whisker, "--base": args.base}, force=args.force)  # fmt: skip
     record = record_or_paper(args.whisker)
     base = None
     if args.excitation == "base":
@@ -135,8 +134,7 @@ def run(args) -> dict:
 
 
 def _read_base_motion(path: Path, column: str | None):
-    from ..classify import recording_rate
-    from ..io import check_samples, read_recording
+    from ..io import check_samples, read_recording, recording_rate
     from ..model import BaseMotion
 
     rec = read_recording(path)

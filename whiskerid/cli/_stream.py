@@ -4,7 +4,7 @@ import math
 import sys
 from pathlib import Path
 
-from ._common import CommandError, HelpFormatter, record_or_paper
+from ._common import CommandError, HelpFormatter, check_outputs, model_folder, record_or_paper
 
 
 def add_parser(sub) -> None:
@@ -68,6 +68,11 @@ def run(args) -> dict:
     from ..hw import OnlineClassifier, open_recorder, run_stream, terrain_source
 
     _check_numbers(args)
+    # --record never replaces a file (a taken name gets -1, -2, ...), but it must not
+    # land inside what the stream reads.
+    check_outputs({"--record": args.record},
+                  {"--model": model_folder(args.model), "--whisker": args.whisker},
+                  force=True)  # fmt: skip
     if args.fast and args.simulate is None:
         raise CommandError("--fast needs --simulate (a real chip runs in real time)")
     model = ClassifierModel.load(args.model)

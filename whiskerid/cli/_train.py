@@ -1,11 +1,19 @@
 """``whiskerid train``: a terrain classifier from a dataset folder."""
 
 import argparse
-import sys
 from pathlib import Path
 
 from .._choices import FEATURE_KINDS
-from ._common import CONTEXT_HELP, CommandError, HelpFormatter, say
+from ._common import (
+    CONTEXT_HELP,
+    FORCE_HELP,
+    QUIET_HELP,
+    CommandError,
+    HelpFormatter,
+    check_outputs,
+    say,
+    show_progress,
+)
 
 
 def add_parser(sub) -> None:
@@ -77,6 +85,8 @@ def add_parser(sub) -> None:
     t.add_argument("--seed", type=int, default=0,
                    help="seed of the initial weights, the validation recordings, the batches "
                    "and the --cv folds")  # fmt: skip
+    t.add_argument("--force", action="store_true", help=FORCE_HELP)
+    t.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     t.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     t.set_defaults(func=run)
 
@@ -85,6 +95,8 @@ def run(args) -> dict:
     """Train (and cross-validate), write the model folder; returns the JSON summary."""
     from ..classify import cross_validate, load_dataset, train_classifier
 
+    check_outputs({"--out": args.out}, {"DATASET": args.dataset}, force=args.force,
+                  folders=("--out",))  # fmt: skip
     if args.window <= 0:
         raise CommandError("--window must be positive")
     if args.cv is not None and args.cv < 2:
@@ -99,7 +111,7 @@ def run(args) -> dict:
     if args.cv is not None:
         cv = cross_validate(ws, features=args.features, folds=args.cv, seed=args.seed,
                             config=config, context_s=args.context, use_speed=use_speed,
-                            progress=sys.stderr.isatty())  # fmt: skip
+                            progress=show_progress(args))  # fmt: skip
         cv = {k: cv[k] for k in ("folds", "accuracy", "accuracy_per_window", "per_class",
                                  "accuracy_by_fold", "context_s", "accuracy_per_recording",
                                  "n_recordings")}  # fmt: skip

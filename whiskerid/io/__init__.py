@@ -3,6 +3,13 @@
 No JAX here: the Raspberry Pi side reads and writes through this package.
 """
 
+from ._atomic import WriteError as WriteError
+from ._atomic import atomic_folder as atomic_folder
+from ._atomic import atomic_path as atomic_path
+from ._atomic import atomic_write as atomic_write
+from ._rate import RATE_METADATA_TOLERANCE as RATE_METADATA_TOLERANCE
+from ._rate import recording_rate as recording_rate
+from ._rate import timestamp_rate as timestamp_rate
 from ._recording import RECORDER_KEY as RECORDER_KEY
 from ._recording import Recording as Recording
 from ._recording import RecordingError as RecordingError

@@ -28,6 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ._atomic import atomic_write
+
 
 class RecordingError(ValueError):
     """A recording that cannot be read or is unfit for use (message says what and where)."""
@@ -81,7 +83,6 @@ class Recording:
 def write_csv(path: str | Path, rec: Recording, *, precision: int = 10) -> Path:
     """Write a recording as CSV with metadata lines; integer columns stay integers."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     buf = io.StringIO()
     for key, value in rec.meta.items():
         buf.write(f"# {key}: {value}\n")
@@ -92,8 +93,7 @@ def write_csv(path: str | Path, rec: Recording, *, precision: int = 10) -> Path:
     fmt = [_formatter(c, precision) for c in cols]
     for row in zip(*cols, strict=True):
         writer.writerow([f(v) for f, v in zip(fmt, row, strict=True)])
-    path.write_text(buf.getvalue())
-    return path
+    return atomic_write(path, buf.getvalue())
 
 
 def _formatter(col: np.ndarray, precision: int):

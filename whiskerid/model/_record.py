@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 import tomli_w
 
+from ..io import atomic_write
 from ._sensor import ADS1115Model, HallSensor
 from ._whisker import CoilSpring, Structure, UniformBeam, Whisker, whisker_from_structure
 
@@ -120,11 +121,8 @@ class WhiskerRecord:
         return out
 
     def save(self, path: str | Path) -> Path:
-        """Write the record as TOML (parent folders are created)."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(self.to_toml())
-        return path
+        """Write the record as TOML (parent folders are created), whole or not at all."""
+        return atomic_write(Path(path), self.to_toml())
 
     def replace(self, **changes) -> "WhiskerRecord":
         """A copy with some fields changed (validated again)."""
@@ -161,7 +159,11 @@ def record_from_dict(data: dict[str, Any]) -> WhiskerRecord:
         raise RecordError(f"schema = {schema!r} is not supported (expected {SCHEMA!r})")
     structure = _structure(_table(data, "structure"))
     damping = _table(data, "damping")
-    sensor = _table(data, "sensor")
+    # Only a Hall sensor needs its [sensor] gain and offset; without the table (an
+    # accelerometer, a laser) the signal is read at the tip and the Hall values are unused.
+    sensor = data.get("sensor", {"position_m": structure.length_m})
+    if not isinstance(sensor, dict):
+        raise RecordError("[sensor] must be a table")
     zeta = _get(damping, "zeta", "damping")
     zeta = tuple(float(z) for z in zeta) if isinstance(zeta, list) else zeta
     n_modes = len(zeta) if isinstance(zeta, tuple) else damping.get("n_modes", 5)
@@ -215,16 +217,73 @@ def _structure(table: dict) -> Structure:
             f"structure: unknown field(s) {sorted(unknown)} for kind {kind!r}; "
             f"known: {sorted(names)}"
         )
+    for key, value in table.items():  # before the classes' own checks: say the range
+        if f"structure.{key}" in RANGES and isinstance(value, int | float):
+            _check_range(f"structure.{key}", value)
     try:
         return cls(**{k: v for k, v in table.items() if k != "kind"})
-    except TypeError as err:  # a required field is absent
+    except TypeError as err:  # a required field is absent, or a value is not a number
         missing = sorted(n for n in names if n not in table)
+        if not missing:
+            raise RecordError(f"structure: {err}") from None
         raise RecordError(f"structure: missing field(s) {missing} ({err})") from None
     except ValueError as err:
         raise RecordError(f"structure.{err}") from None
 
 
+#: Plausible ranges (inclusive, SI) of a record's numbers: a value outside is a typing or
+#: unit slip (1e9 m for 1 m, kg for g), and a model built on it answers without meaning.
+RANGES = {
+    "structure.length_m": (1e-4, 10.0, "m"),
+    "structure.wire_radius_m": (1e-6, 0.1, "m"),
+    "structure.mean_coil_radius_m": (1e-5, 1.0, "m"),
+    "structure.n_coils": (0.5, 1e4, ""),
+    "structure.wire_density_kg_m3": (100.0, 25e3, "kg/m^3"),
+    "structure.shear_modulus_pa": (1e5, 1e12, "Pa"),
+    "structure.youngs_modulus_pa": (1e5, 1.5e12, "Pa"),
+    "structure.density_kg_m3": (100.0, 25e3, "kg/m^3"),
+    "structure.width_m": (1e-6, 1.0, "m"),
+    "structure.thickness_m": (1e-6, 1.0, "m"),
+    "structure.diameter_m": (1e-6, 1.0, "m"),
+    "tip_mass_kg": (0.0, 100.0, "kg"),
+    "sensor.hall_gain_v_per_m": (-1e9, 1e9, "V/m"),
+    "sensor.hall_offset_v": (-1e3, 1e3, "V"),
+    "sensor.hall_quadratic_v_per_m2": (-1e15, 1e15, "V/m^2"),
+}
+
+
+def _check_range(key: str, value) -> None:
+    lo, hi, unit = RANGES[key]
+    ok = isinstance(value, int | float) and not isinstance(value, bool)
+    if not (ok and math.isfinite(value) and lo <= value <= hi):
+        raise RecordError(
+            f"{key} = {value!r} is outside the plausible range {lo:g} .. {hi:g}"
+            + (f" {unit}" if unit else "")
+            + " (a finite number): check the value and its unit"
+        )
+
+
+def _check_ranges(rec: WhiskerRecord) -> None:
+    """Refuse absurd numbers, naming the key and the range allowed."""
+    st = rec.structure
+    for f in fields(st):
+        key = f"structure.{f.name}"
+        value = getattr(st, f.name)
+        if key in RANGES and value is not None:
+            _check_range(key, value)
+    if isinstance(st, CoilSpring) and st.wire_radius_m >= st.mean_coil_radius_m:
+        raise RecordError(
+            f"structure.wire_radius_m = {st.wire_radius_m!r} must be smaller than "
+            f"structure.mean_coil_radius_m = {st.mean_coil_radius_m!r} (a wire thicker "
+            "than its coil cannot be wound)"
+        )
+    _check_range("tip_mass_kg", rec.tip_mass_kg)
+    for name in ("gain_v_per_m", "offset_v", "quadratic_v_per_m2"):
+        _check_range(f"sensor.hall_{name}", float(getattr(rec.hall, name)))
+
+
 def _check_record(rec: WhiskerRecord) -> None:
+    _check_ranges(rec)
     zetas = rec.zeta if isinstance(rec.zeta, tuple) else (rec.zeta,)
     if not all(isinstance(z, int | float) and math.isfinite(z) and 0 <= z < 1 for z in zetas):
         raise RecordError(f"damping.zeta = {rec.zeta!r} must satisfy 0 <= zeta < 1")

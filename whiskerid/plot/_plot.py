@@ -5,6 +5,7 @@ from pathlib import Path
 import numpy as np
 
 from ..fit import amplitude_spectrum, find_peaks, resample_uniform
+from ..io import atomic_path
 
 
 def _pyplot():
@@ -123,10 +124,12 @@ def plot_recording_labels(path: str | Path, t: np.ndarray, x: np.ndarray, result
 def _save(fig, path, *, dpi: int = 110) -> Path:
     """Write ``fig`` as a PNG to exactly ``path`` (without ``format``, matplotlib would
     write ``path.png`` for a name without a suffix) and close it."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi, format="png")
     import matplotlib.pyplot as plt
 
-    plt.close(fig)
+    path = Path(path)
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=dpi, format="png")
+    finally:
+        plt.close(fig)
     return path

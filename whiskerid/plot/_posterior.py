@@ -1,22 +1,97 @@
-"""Posterior plots: a small corner plot and trace plots (matplotlib, Agg; no ``corner``)."""
+"""Posterior plots: a small corner plot and trace plots (matplotlib, Agg; no ``corner``).
 
+Tick labels carry their own digits (no offset text such as ``+4.6e1`` beside an axis,
+where it collides with the labels), every axis names its quantity and unit, and the noise
+σ of each recording is labelled as such rather than shown as if it were the interval.
+"""
+
+import math
 from pathlib import Path
 
 import numpy as np
 
 from ._plot import _pyplot, _save
 
-_CORNER = ("f1_hz", "zeta", "kappa", "EI", "C", "sigma_1")
+#: The physical quantities drawn, in order (those the posterior has).
+_PHYSICAL = ("f1_hz", "zeta", "kappa", "EI", "C")
+#: Axis labels with units.
+_LABELS = {
+    "f1_hz": "f₁ (Hz)",
+    "zeta": "ζ",
+    "kappa": "κ = EI/(ρa) (m⁴/s²)",
+    "EI": "EI (N m²)",
+    "C": "C",
+}
+#: Noise σ panels drawn in the trace plot at most (one per recording).
+_MAX_SIGMAS = 6
+#: Correlation above which a quantity is a function of one already drawn (κ and EI of f₁).
+_SAME = 0.9999
+
+
+def _label(name: str) -> str:
+    if name.startswith("sigma_"):
+        return f"noise σ, recording {name.split('_', 1)[1]}"
+    return _LABELS.get(name, name)
+
+
+def _digits(lo: float, hi: float) -> int:
+    """Significant digits that tell ``lo`` and ``hi`` apart (tick labels, titles)."""
+    span, scale = abs(hi - lo), max(abs(lo), abs(hi))
+    if span <= 0 or scale <= 0 or not math.isfinite(span / scale):
+        return 4
+    return int(min(max(math.ceil(math.log10(scale / span)) + 2, 2), 12))
+
+
+def _plain_ticks(axis, x: np.ndarray) -> None:
+    """At most three ticks, written in full (no offset text, no ×10ⁿ)."""
+    from matplotlib.ticker import FuncFormatter, MaxNLocator
+
+    lo, hi = np.percentile(x, [0.5, 99.5]) if x.size else (0.0, 1.0)
+    d = _digits(float(lo), float(hi))
+    axis.set_major_locator(MaxNLocator(3))
+    axis.set_major_formatter(FuncFormatter(lambda v, _pos: f"{v:.{d}g}"))
+
+
+def _interval_title(name: str, p: dict) -> str:
+    d = _digits(p["q16"], p["q84"])
+    return f"{_label(name)}\n{p['median']:.{d}g}  (68 %: {p['q16']:.{d}g} … {p['q84']:.{d}g})"
+
+
+def _drawn(post, names) -> tuple[list[str], list[str]]:
+    """The quantities to draw, and those left out as functions of one drawn (κ, EI of f₁)."""
+    keep, same = [], []
+    for n in names:
+        col = post.samples[:, post.names.index(n)]
+        twin = False
+        for k in keep:
+            other = post.samples[:, post.names.index(k)]
+            if np.std(col) > 0 and np.std(other) > 0:
+                twin = abs(float(np.corrcoef(col, other)[0, 1])) > _SAME
+            if twin:
+                same.append(f"{_label(n)} follows {_label(k)}")
+                break
+        if not twin:
+            keep.append(n)
+    return keep, same
 
 
 def plot_corner(path: str | Path, post, names: tuple[str, ...] | None = None) -> Path:
-    """Histograms on the diagonal, 2-D sample clouds below, 16/50/84 % lines; PNG."""
+    """Histograms on the diagonal, 2-D sample clouds below, 16/50/84 % lines; PNG.
+
+    Draws the physical quantities (``names`` to choose others); a quantity that is a
+    function of one already drawn (κ and EI of f₁, the geometry fixing C) is named in the
+    caption instead of drawn as a line. The noise σ of each recording is listed in the
+    caption, labelled per recording.
+    """
     plt = _pyplot()
-    names = [n for n in (names or _CORNER) if n in post.names]
-    idx = [post.names.index(n) for n in names]
-    x = post.samples[:, idx]
+    wanted = [n for n in (names or _PHYSICAL) if n in post.names]
+    names, same = _drawn(post, wanted)
+    x = post.samples[:, [post.names.index(n) for n in names]]
     k = len(names)
-    fig, axes = plt.subplots(k, k, figsize=(2.3 * k, 2.3 * k), squeeze=False)
+    width = max(2.6 * k, 6.5)
+    caption = _caption(post, same, chars=int(width * 15))
+    foot = 0.14 * (caption.count("\n") + 1) + 0.15  # inches under the panels
+    fig, axes = plt.subplots(k, k, figsize=(width, 2.6 * k + 0.5 + foot), squeeze=False)
     for i in range(k):
         for j in range(k):
             ax = axes[i, j]
@@ -27,38 +102,96 @@ def plot_corner(path: str | Path, post, names: tuple[str, ...] | None = None) ->
                 ax.hist(x[:, i], bins=40, histtype="step", color="k")
                 for q in np.percentile(x[:, i], [16, 50, 84]):
                     ax.axvline(q, color="C0", lw=0.8, ls="--")
-                p = post.params[names[i]]
-                ax.set_title(
-                    f"{names[i]} = {p['median']:.4g}\n+{p['q84'] - p['median']:.2g} "
-                    f"-{p['median'] - p['q16']:.2g}",
-                    fontsize=8,
-                )
+                ax.set_title(_interval_title(names[i], post.params[names[i]]), fontsize=8)
                 ax.set_yticks([])
             else:
                 ax.plot(x[:, j], x[:, i], ",", color="k", alpha=0.3)
+                _plain_ticks(ax.yaxis, x[:, i])
+            _plain_ticks(ax.xaxis, x[:, j])
             if i == k - 1:
-                ax.set_xlabel(names[j], fontsize=8)
+                ax.set_xlabel(_label(names[j]), fontsize=8)
+            else:
+                ax.set_xticklabels([])
             if j == 0 and i > 0:
-                ax.set_ylabel(names[i], fontsize=8)
+                ax.set_ylabel(_label(names[i]), fontsize=8)
+            elif i != j:
+                ax.set_yticklabels([])
             ax.tick_params(labelsize=6)
-    fig.tight_layout()
+            plt.setp(ax.get_xticklabels(), rotation=30, ha="right")
+    fig.text(0.01, 0.01, caption, fontsize=7, va="bottom")
+    d = post.diagnostics
+    fig.suptitle(
+        f"posterior: {d['walkers']} walkers × {d['steps']} steps, first {d['burn']} discarded, "
+        f"{d['n_samples']} samples" + ("" if d["converged"] else " (not converged)"),
+        fontsize=9,
+    )
+    fig.tight_layout(rect=(0, foot / fig.get_figheight(), 1, 1))
     return _save(fig, path)
+
+
+def _caption(post, same: list[str], *, chars: int = 100) -> str:
+    """What the corner plot shows, in words: lines, titles, left-out quantities, noise σ
+    (wrapped to ``chars`` characters a line)."""
+    import textwrap
+
+    parts = ["Dashed lines: 16, 50 and 84 % quantiles; titles: median and 68 % interval."]
+    if same:
+        parts.append("Not drawn, being functions of a drawn quantity: " + "; ".join(same) + ".")
+    sigmas = [n for n in post.names if n.startswith("sigma_")]
+    if sigmas:
+        text = ", ".join(
+            f"recording {n.split('_', 1)[1]}: {post.params[n]['median']:#.3g}"
+            for n in sigmas[:_MAX_SIGMAS]
+        )
+        more = f" (and {len(sigmas) - _MAX_SIGMAS} more)" if len(sigmas) > _MAX_SIGMAS else ""
+        parts.append(
+            f"Noise σ per recording (median, signal units; one per recording, not an "
+            f"interval): {text}{more}."
+        )
+    return "\n".join(textwrap.fill(p, chars) for p in parts)
 
 
 def plot_trace(path: str | Path, post) -> Path:
-    """Every walker's trace per reported quantity, with the burn-in shaded; PNG."""
+    """Every walker's trace per reported quantity, with the discarded burn-in shaded; PNG."""
     plt = _pyplot()
-    names = [n for n in _CORNER if n in post.names]
+    sigmas = [n for n in post.names if n.startswith("sigma_")][:_MAX_SIGMAS]
+    names = [n for n in _PHYSICAL if n in post.names] + sigmas
     chain = post.derived_chain
-    fig, axes = plt.subplots(len(names), 1, figsize=(9, 1.8 * len(names)), sharex=True)
+    fig, axes = plt.subplots(len(names), 1, figsize=(9, 1.6 * len(names) + 0.8), sharex=True)
     axes = np.atleast_1d(axes)
-    burn = post.diagnostics["burn"]
-    for ax, name in zip(axes, names, strict=True):
-        ax.plot(chain[:, :, post.names.index(name)], lw=0.3, alpha=0.4, color="k")
-        ax.axvspan(0, burn, color="C1", alpha=0.15)
-        ax.set_ylabel(name, fontsize=8)
-    axes[-1].set_xlabel("step")
     d = post.diagnostics
-    axes[0].set_title(f"{d['message']}; acceptance {d['acceptance']:.2f}", fontsize=8)
+    burn = d["burn"]
+    for ax, name in zip(axes, names, strict=True):
+        x = chain[:, :, post.names.index(name)]
+        ax.plot(x, lw=0.3, alpha=0.4, color="k")
+        ax.axvspan(0, burn, color="C1", alpha=0.15, label=f"burn-in ({burn} steps, discarded)")
+        _plain_ticks(ax.yaxis, x[burn:].ravel())
+        ax.set_ylabel(_label(name), fontsize=8)
+        ax.tick_params(labelsize=7)
+    axes[0].legend(loc="upper right", fontsize=7)
+    axes[-1].set_xlabel("step")
+    fig.suptitle(_trace_title(d), fontsize=9)
     fig.tight_layout()
     return _save(fig, path)
+
+
+def _trace_title(d: dict) -> str:
+    """Two lines: what is drawn, and whether the run is long enough (and what to do)."""
+    head = (
+        f"emcee traces: {d['walkers']} walkers over {d['steps']} steps; mean acceptance "
+        f"{d['acceptance']:.2f}"
+    )
+    if d.get("steps_needed") is None:
+        verdict = "not converged: too few steps to estimate the autocorrelation time τ"
+    elif d["converged"]:
+        verdict = (
+            f"converged: {d['steps']} steps ≥ 50 × the longest autocorrelation time "
+            f"(τ = {d['max_tau']:.3g} steps) = {d['steps_needed']}"
+        )
+    else:
+        verdict = (
+            f"not converged: 50 × the longest autocorrelation time (τ = {d['max_tau']:.3g} "
+            f"steps) = {d['steps_needed']} steps needed; resume with "
+            f"{d['steps_needed'] - d['steps']} more"
+        )
+    return f"{head}\n{verdict}"

@@ -74,6 +74,7 @@ def run_sampler(
     resume: bool = False,
     progress: bool = False,
     move: str = "de",
+    stop=None,
 ):
     """Run emcee (vectorised) and return the sampler.
 
@@ -86,6 +87,9 @@ def run_sampler(
         resume: Continue the chain in ``backend`` instead of starting afresh.
         progress: emcee's progress bar (tqdm).
         move: emcee's proposal, one of :data:`MOVES` (:func:`emcee_moves`).
+        stop: Called after every step; when it returns True the run stops there with
+            :class:`KeyboardInterrupt` (raised between steps, never inside the
+            log-probability, so the backend holds every finished step and resumes).
     """
     import emcee
 
@@ -123,7 +127,9 @@ def run_sampler(
         p0 = initial_walkers(prob, walkers, np.random.default_rng(seed))
         state = emcee.State(p0, random_state=np.random.RandomState(seed).get_state())
     sampler.whiskerid_move = move  # for the provenance (summarize)
-    sampler.run_mcmc(state, steps, progress=progress)
+    for _ in sampler.sample(state, iterations=steps, progress=progress):
+        if stop is not None and stop():
+            raise KeyboardInterrupt
     return sampler
 
 
@@ -138,6 +144,7 @@ def sample_posterior(
     resume: bool = False,
     progress: bool = False,
     move: str = "de",
+    stop=None,
     **setup,
 ) -> Posterior:
     """Posterior of ζ, f_1, κ (EI or C) and the noise, jointly over recordings of one whisker.
@@ -152,6 +159,7 @@ def sample_posterior(
         resume: Continue the chain stored in ``backend``.
         progress: Show emcee's progress bar.
         move: emcee's proposal, one of :data:`MOVES` (:func:`emcee_moves`).
+        stop: Polled between steps; True stops the run (:func:`run_sampler`).
         **setup: Passed to :func:`setup_posterior` (``likelihood``, ``nu``, ``prior``,
             ``n_modes``, ``pin``, ``static``, ``marginalize``, ...).
 
@@ -169,5 +177,6 @@ def sample_posterior(
         resume=resume,
         progress=progress,
         move=move,
+        stop=stop,
     )
     return summarize(prob, sampler, seed=seed)
