@@ -106,7 +106,7 @@ def find_decays(t: np.ndarray, y: np.ndarray) -> list[Decay]:
 def dominant_frequency(t: np.ndarray, y: np.ndarray) -> float | None:
     """Frequency (Hz) of the largest spectral peak away from DC, interpolated; None if flat."""
     n = y.size
-    if n < 16:
+    if n < 16 or not (np.all(np.isfinite(y)) and np.all(np.isfinite(t))):
         return None
     dt = float(np.median(np.diff(t)))
     yy = np.interp(t[0] + dt * np.arange(n), t, y)  # uniform grid for the FFT
@@ -203,10 +203,17 @@ def _predict(t, y, fit, at, t0, freqs, rates):
     return misfit, float(np.sqrt(np.mean(oscillation**2)))
 
 
-def _fit_tail(t, y, f0):
-    """Frequencies and decay rates of one or two damped sinusoids fitted to ``(t, y)``."""
-    t0 = t[0]
+def _fit_tail(t, y, f0, *, t0=None, start=None):
+    """Frequencies and decay rates of one or two damped sinusoids fitted to ``(t, y)``
+    (from ``start = (freqs, rates)`` when given, else from ``f0`` and the spectrum)."""
+    t0 = t[0] if t0 is None else t0
     span = t[-1] - t[0]
+    if start is not None:
+        n = len(start[0])
+        x0 = np.concatenate([np.asarray(start[0], float), np.asarray(start[1], float)])
+        fit = _scipy_lsq(lambda x: _linear_fit(t, y, t0, x[:n], np.abs(x[n:])), x0,
+                         method="lm", max_nfev=100 * x0.size)  # fmt: skip
+        return fit.x[:n], np.abs(fit.x[n:])
     best = None
     for n_lines in (1, 2):
         freqs0 = [f0] if n_lines == 1 else [f0, _second_peak(t, y, f0)]
@@ -306,15 +313,20 @@ def _walk_back(t, y, clipped, period, ta, lo, freqs, rates, sigma):
 
 
 def _walk_forward(t, y, period, start, ta, tb, hi, freqs, rates, sigma):
-    """One past the last index that the decay model (fitted from ``start``) keeps predicting."""
+    """One past the last index that the decay model, fitted on what is already accepted,
+    keeps predicting (half a period at a time). Its frequencies and decay rates are fitted
+    again each time the accepted stretch doubles: a long, lightly damped ringing drifts in
+    phase away from rates estimated on its first periods."""
     chunk = max(2, period // 2)
-    e = min(hi, ta + 4 * period)
-    # The model's linear part is fitted up to the tail's end, never on what follows: a
-    # refit would follow the next pluck's slow bend step by step.
+    e = tb
+    refit_at = 2 * (e - start)
     while e < hi:
+        if e - start >= refit_at:
+            freqs, rates = _fit_tail(t[start:e], y[start:e], float(freqs[0]), t0=t[ta],
+                                     start=(freqs, rates))  # fmt: skip
+            refit_at = 2 * (e - start)
         c = min(chunk, hi - e)
-        fit = slice(start, min(e, tb))
-        misfit, osc = _predict(t, y, fit, slice(e, e + c), t[ta], freqs, rates)
+        misfit, osc = _predict(t, y, slice(start, e), slice(e, e + c), t[ta], freqs, rates)
         if not _explains(misfit, osc, sigma):
             break
         e += c

@@ -83,4 +83,4 @@ def _spectra(ax, t, y, model, modes, unit):
                                     if any(m < nyquist for m in modes) else nyquist)))  # fmt: skip
     ax.set_xlabel("frequency (Hz)")
     ax.set_ylabel(f"amplitude ({unit})")
-    ax.legend(fontsize=7, loc="upper right")
+    ax.legend(fontsize=7, loc="lower left")
