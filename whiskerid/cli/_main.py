@@ -20,6 +20,7 @@ from . import (
     _demo,
     _evaluate,
     _posterior,
+    _record,
     _simulate,
     _stream,
     _train,
@@ -77,6 +78,7 @@ def build_parser() -> argparse.ArgumentParser:
     _train.add_parser(sub)
     _evaluate.add_parser(sub)
     _classify.add_parser(sub)
+    _record.add_parser(sub)
     _stream.add_parser(sub)
     return parser
 
