@@ -135,6 +135,37 @@ def source_from_recording(
     return source
 
 
+def replay_sources(
+    rec: str | os.PathLike[str] | Recording, names: Sequence[str], *, fsr_v: float | None = None
+) -> list[Source]:
+    """One source per input name, replaying a recording through the emulated chip.
+
+    Each input plays the column of its own name (at its own times, ``t_<name>``), else the
+    first column. A recording in ADC codes (``units: code``, what the stream and
+    ``whiskerid record`` write by default) is turned back into volts with its ``fsr_v``
+    metadata (or ``fsr_v``, default the driver's 4.096 V), so the chip reads the same codes.
+
+    Raises:
+        ValueError: Units other than volts or codes.
+    """
+    if not isinstance(rec, Recording):
+        rec = read_recording(rec)
+    units = rec.meta.get("units", "V")
+    scale = 1.0
+    if units == "code":
+        scale = float(rec.meta.get("fsr_v", fsr_v or 4.096)) / 32768.0
+    elif units != "V":
+        raise ValueError(
+            f"{rec.source or 'recording'}: units are {units!r}; a replay needs volts or ADC codes"
+        )
+    out = []
+    for name in names:
+        column = name if name in rec.columns else None
+        t = rec.time_of(column)
+        out.append(source_from_recording(t, np.asarray(rec.signal(column)) * scale))
+    return out
+
+
 def _volts_of(rec: str | os.PathLike[str] | Recording, column: str | None):
     if not isinstance(rec, Recording):
         rec = read_recording(rec)

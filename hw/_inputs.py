@@ -23,6 +23,7 @@ from types import MappingProxyType
 from whiskerid.io._ads1115_spec import DATA_RATES_SPS, OSCILLATOR_TOLERANCE
 
 from ._ads1115 import ADS1115, Config
+from ._emulator import EmulatedADS1115, EmulatedBus
 
 #: Input name -> the MUX field's name for it (the differential pairs the chip offers).
 INPUT_MUX = MappingProxyType(
@@ -204,3 +205,26 @@ class Rounds:
             return None
         times, self._times = self._times, [None] * self.n_inputs
         return list(times), list(self._codes)
+
+
+def emulated_bus(inputs: Sequence[Input], sources: Sequence, *, seed: int = 0,
+                 noise_v: float = 0.0, **timing) -> EmulatedADS1115 | EmulatedBus:  # fmt: skip
+    """Emulated chip(s) answering on the inputs' addresses, each input's positive pin fed by
+    its source (a differential input's negative pin is grounded).
+
+    Args:
+        inputs: The inputs.
+        sources: One ``source(t_s) -> volts`` per input.
+        seed: Seed of the first chip's noise (the next chips get ``seed + 1``, ...).
+        noise_v: Input noise per conversion, volts RMS.
+        **timing: ``clock`` and ``sleep`` for every chip.
+    """
+    per_chip: dict[int, list] = {}
+    for inp, source in zip(inputs, sources, strict=True):
+        pins = per_chip.setdefault(inp.address, [None] * 4)
+        pins[int(inp.mux[3])] = source  # AINp_...: the positive pin's number
+    chips = [
+        EmulatedADS1115(pins, address=a, seed=seed + i, noise_v=noise_v, **timing)
+        for i, (a, pins) in enumerate(per_chip.items())
+    ]
+    return chips[0] if len(chips) == 1 else EmulatedBus(chips)

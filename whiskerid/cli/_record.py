@@ -132,17 +132,9 @@ def _config(hw, inputs, args):
 
 
 def _emulated_bus(hw, inputs, args, timing):
-    """Emulated chip(s) answering on the inputs' addresses, each pin fed by its source."""
-    sources = _sources(inputs, args)
-    per_chip: dict[int, list] = {}
-    for inp, source in zip(inputs, sources, strict=True):
-        pins = per_chip.setdefault(inp.address, [None] * 4)
-        pins[int(inp.mux[3])] = source  # the positive pin: AINp_...
-    chips = [
-        hw.EmulatedADS1115(pins, address=a, seed=args.seed + i, noise_v=1e-4, **timing)
-        for i, (a, pins) in enumerate(per_chip.items())
-    ]
-    return chips[0] if len(chips) == 1 else hw.EmulatedBus(chips)
+    """Emulated chip(s) answering on the inputs' addresses, each input fed by its source."""
+    return hw.emulated_bus(inputs, _sources(inputs, args), seed=args.seed, noise_v=1e-4,
+                           **timing)  # fmt: skip
 
 
 def _sources(inputs, args) -> list:
@@ -151,13 +143,10 @@ def _sources(inputs, args) -> list:
 
     what = args.emulate
     if Path(what).suffix.lower() in (".csv", ".npz", ".npy"):
-        from ..io import read_recording
-
-        rec = read_recording(what)
-        return [
-            hw.source_from_recording(rec, column=i.name if i.name in rec.columns else None)
-            for i in inputs
-        ]
+        try:
+            return hw.replay_sources(what, [i.name for i in inputs], fsr_v=args.fsr)
+        except ValueError as e:
+            raise CommandError(str(e)) from None
     if what == "pluck":
         return [_pluck(args)] * len(inputs)
     return [_terrain(args, what, j) for j in range(len(inputs))]
