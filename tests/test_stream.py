@@ -325,3 +325,52 @@ def _complete_data_rows(path):
         return 0
     lines = path.read_text().split("\n")[:-1]  # the last piece is torn or empty
     return sum(1 for line in lines if line and not line.startswith(("#", "t,")))
+
+
+def test_stream_replays_a_recording_with_odometry_and_sends_labels(tiny_model, tmp_path, capsys):
+    """A recording made with `whiskerid record` goes through the emulated chip as it would
+    online; the odometry says the robot stops at 4 s; labels go out over loopback UDP."""
+    import socket
+
+    rec = tmp_path / "brick.csv"
+    argv = ["record", str(rec), "--emulate", "brick", "--fast", "--duration", "8"]
+    assert main(argv) == 0
+    odo = tmp_path / "odo.csv"
+    odo.write_text("t,speed_mps\n0,0.2\n3.99,0.2\n4.0,0\n9,0\n")
+    listener = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    listener.bind(("127.0.0.1", 0))
+    listener.settimeout(0.5)
+    port = listener.getsockname()[1]
+    argv = ["stream", "--model", str(tiny_model), "--replay", str(rec), "--fast", "--duration",
+            "7.5", "--speed-from", str(odo), "--labels-to", f"udp:{port}", "--compile-cache",
+            "none", "--json", "--quiet"]  # fmt: skip
+    assert main(argv) == 0
+    out = json.loads(capsys.readouterr().out)
+    msgs = []
+    while True:
+        try:
+            msgs.append(json.loads(listener.recv(4096)))
+        except TimeoutError:
+            break
+    listener.close()
+    assert len(msgs) == out["windows"] == 13  # windows end at 1.5, 2.0, ..., 7.5 s
+    moving = [m for m in msgs if m["t_s"] < 4.0]
+    stopped = [m for m in msgs if m["t_s"] >= 4.0]
+    assert all(m["label"] == "stopped" and m["speed_mps"] == 0 for m in stopped)
+    assert all(m["label"] in ("brick", "sand") and m["speed_mps"] == 0.2 for m in moving)
+    assert out["label_counts"]["stopped"] == len(stopped) and out["majority_label"] == "brick"
+
+
+def test_stream_of_a_dead_sensor_labels_every_window_a_fault_and_fails(
+    tiny_model, tmp_path, capsys
+):
+    rec = tmp_path / "dead.csv"
+    t = np.arange(0, 5, 0.005)
+    wi.write_csv(rec, wi.Recording(t=t, columns={"adc": np.full(t.size, 13_000)},
+                                   meta={"units": "code"}))  # fmt: skip
+    argv = ["stream", "--model", str(tiny_model), "--replay", str(rec), "--fast", "--duration",
+            "4", "--compile-cache", "none"]  # fmt: skip
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("s  sensor-fault: flat: every sample is 13000") == 1  # once per episode
+    assert "error: no window got a terrain: sensor-fault: flat (6)" in err
