@@ -374,3 +374,22 @@ def test_stream_of_a_dead_sensor_labels_every_window_a_fault_and_fails(
     err = capsys.readouterr().err
     assert err.count("s  sensor-fault: flat: every sample is 13000") == 1  # once per episode
     assert "error: no window got a terrain: sensor-fault: flat (6)" in err
+
+
+@pytest.mark.slow
+def test_a_restart_reuses_the_compile_cache(tiny_model, tmp_path):
+    """The stream's compiled functions land in --compile-cache; a second start loads them."""
+    rec = tmp_path / "r.csv"
+    assert main(["record", str(rec), "--emulate", "brick", "--fast", "--duration", "3"]) == 0
+    cache = tmp_path / "cache"
+    argv = [sys.executable, "-m", "whiskerid.cli", "stream", "--model", str(tiny_model),
+            "--replay", str(rec), "--fast", "--duration", "2",
+            "--compile-cache", str(cache)]  # fmt: skip
+    times = []
+    for _ in range(2):
+        t0 = time.perf_counter()
+        done = subprocess.run(argv, capture_output=True, text=True, timeout=300)
+        times.append(time.perf_counter() - t0)
+        assert done.returncode == 0, done.stderr
+    assert any(f.is_file() for f in cache.rglob("*"))
+    assert times[1] < times[0]
