@@ -66,7 +66,12 @@ def add_parser(sub) -> None:
         "--units", choices=("code", "V"), default="code", help="write ADC codes or volts"
     )
     p.add_argument("--whisker", type=Path, help="whisker record for --emulate (the paper's)")
-    p.add_argument("--speed", type=float, default=0.2, help="robot speed for --emulate TERRAIN")
+    p.add_argument(
+        "--speed",
+        type=float,
+        help="robot speed (m/s), written as speed_mps metadata for train and classify; "
+        "drives --emulate TERRAIN (0.2 there by default)",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the emulated signal and noise")
     p.add_argument(
         "--fast", action="store_true", help="with --emulate: a virtual clock, as fast as possible"
@@ -100,6 +105,8 @@ def _check(args) -> None:
     for flag, value in (("--rate", args.rate), ("--duration", args.duration)):
         if value is not None and not (math.isfinite(value) and value > 0):
             raise CommandError(f"{flag} {value!r} must be a positive number")
+    if args.speed is not None and not (math.isfinite(args.speed) and 0 <= args.speed < 5):
+        raise CommandError(f"--speed {args.speed!r} must be a plausible speed (0 <= v < 5 m/s)")
     if args.fast and not args.emulate:
         raise CommandError("--fast needs --emulate (a real chip runs in real time)")
     if args.fast and args.duration is None:
@@ -175,7 +182,8 @@ def _terrain(args, terrain: str, j: int):
 
     if args.duration is None:
         raise CommandError("--emulate TERRAIN needs --duration (its terrain is made up front)")
-    return terrain_source(record_or_paper(args.whisker), terrain, args.speed, args.duration + 2,
+    speed = 0.2 if args.speed is None else args.speed
+    return terrain_source(record_or_paper(args.whisker), terrain, speed, args.duration + 2,
                           seed=args.seed + j)  # fmt: skip
 
 
@@ -196,6 +204,11 @@ def _record(hw, bus, inputs, config, mode, args, timing) -> dict:
         meta["interleave_s"] = f"{1.0 / (n * args.rate):.9g}"
     if args.emulate == "pluck":
         meta["excitation"] = "decay"
+    elif args.emulate and not Path(args.emulate).suffix:
+        meta["terrain"] = args.emulate
+        meta["speed_mps"] = 0.2 if args.speed is None else args.speed
+    if args.speed is not None:
+        meta["speed_mps"] = args.speed
     rounds = hw.Rounds(n)
     value = (lambda c: to_volts(c)) if args.units == "V" else (lambda c: c)
     previous = signal.getsignal(signal.SIGTERM)
