@@ -224,3 +224,18 @@ def test_record_survives_kill_9_and_needs_no_jax(tmp_path, two_plane):
     done = subprocess.run([*cmd[:4], str(tmp_path / "j.csv"), *cmd[5:], "--duration", "0.5"],
                           capture_output=True, text=True, timeout=60)  # fmt: skip
     assert done.returncode == 0 and done.stdout.strip() == "False", done.stderr
+
+
+def test_a_bus_error_of_another_type_is_retried_like_an_oserror():
+    clock = FakeClock()
+    timing = {"clock": clock.now_ns, "sleep": clock.sleep}
+    chip = EmulatedADS1115(lambda t: 1.0 + 0 * t, **timing)
+    from whiskerid.hw import ADS1115, I2CError
+
+    adc = ADS1115(chip, **timing)
+    chip.fail_next(2, RuntimeError("bus glitch"))
+    assert adc.read_volts() == pytest.approx(1.0, abs=2e-4)  # retried, not raised
+    assert adc.stats.retries == 2
+    chip.fail_next(4, KeyError("odd"))
+    with pytest.raises(I2CError, match="KeyError"):
+        adc.read()
