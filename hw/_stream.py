@@ -102,9 +102,10 @@ class OnlineClassifier:
     ``min_fill`` of its samples) is labelled ``no-data``; one that is flat (a chip stuck at
     one code, a disconnected sensor), clipped at the ADC's full scale, outside the valid
     range or not finite is labelled ``sensor-fault``; a model output that is not a
-    probability (NaN weights) gives ``model-fault``; a robot slower than ``stop_speed_mps``
-    gives ``stopped``. Each such label carries its reason and confidence 0, and breaks the
-    context: later windows are not fused with the ones before it.
+    probability (NaN weights) gives ``model-fault``; a robot slower than ``stop_speed_mps``,
+    or a signal quieter than ``quiet_std`` (a whisker at rest), gives ``stopped``. Each such
+    label carries its reason and confidence 0, and breaks the context: later windows are not
+    fused with the ones before it.
 
     Args:
         model: A trained :class:`whiskerid.ClassifierModel` (``window_proba``,
@@ -119,6 +120,8 @@ class OnlineClassifier:
             a window reaching them for ``clip_fraction`` of its samples is clipped.
         clip_fraction: Share of a window's samples at the limits that makes it clipped.
         stop_speed_mps: Below this speed the robot counts as stopped.
+        quiet_std: A window whose standard deviation is below this (in the fed units) is a
+            whisker at rest: ``stopped``. None: never.
         clock: Clock used for latencies (seconds, monotonic).
     """
 
@@ -132,6 +135,7 @@ class OnlineClassifier:
         limits: tuple[float, float] = (CODE_MIN, CODE_MAX),
         clip_fraction: float = 0.02,
         stop_speed_mps: float = 0.02,
+        quiet_std: float | None = None,
         clock: Callable[[], float] = time.perf_counter,
     ):
         if hop_s <= 0:
@@ -144,6 +148,7 @@ class OnlineClassifier:
         self.limits = (float(limits[0]), float(limits[1]))
         self.clip_fraction = float(clip_fraction)
         self.stop_speed_mps = float(stop_speed_mps)
+        self.quiet_std = quiet_std
         self.skipped_windows = 0
         self._clock = clock
         # Room for one window plus slack for jitter and a late hop.
@@ -207,6 +212,8 @@ class OnlineClassifier:
         fault = self._check(x)
         if fault is None and speed is not None and speed < self.stop_speed_mps:
             fault = (STOPPED, f"the robot is stopped ({speed:g} m/s)")
+        if fault is None and self.quiet_std is not None and (sd := np.std(x)) < self.quiet_std:
+            fault = (STOPPED, f"quiet: the signal varies by {sd:.3g} RMS (whisker at rest?)")
         return PendingWindow(t_s, x, arrived, fault, speed)
 
     def _check(self, x: np.ndarray) -> tuple[str, str] | None:

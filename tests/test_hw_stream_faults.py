@@ -182,3 +182,13 @@ def test_a_stopped_robot_is_labelled_stopped_not_a_terrain():
     got = [w for ti, xi in zip(t, x, strict=True) if (w := online.push(ti, xi)) is not None]
     assert [w.label for w in got] == ["carpet"] * 4 + ["stopped"] * 6
     assert got[-1].speed_mps == 0.0 and "stopped" in got[-1].reason
+
+
+def test_a_quiet_whisker_is_labelled_stopped_a_moving_one_is_classified():
+    online = OnlineClassifier(Model(), hop_s=0.5, quiet_std=3.0)
+    t = np.arange(0, 4.0, 1 / 200)
+    rest = np.round(np.random.default_rng(2).standard_normal(t.size))  # noise of about 1 code
+    x = np.where(t < 2.0, rest, np.round(200 * np.sin(2 * np.pi * 17 * t)))
+    got = [w for ti, xi in zip(t, x, strict=True) if (w := online.push(ti, xi)) is not None]
+    assert [w.label for w in got] == ["stopped"] * 3 + ["carpet"] * 3  # ends 1.0 .. 3.5 s
+    assert "quiet" in got[0].reason

@@ -84,6 +84,14 @@ def add_parser(sub) -> None:
         "reason): - for standard output, or udp:PORT on localhost",
     )
     p.add_argument(
+        "--stopped-below",
+        type=float,
+        default=3.0,
+        metavar="CODES",
+        help="a window varying by less than this many ADC codes RMS is a whisker at rest: "
+        "labelled stopped (0: never)",
+    )
+    p.add_argument(
         "--duration",
         type=float,
         help="stop after this many seconds (default: run until Ctrl-C or SIGTERM)",
@@ -151,7 +159,12 @@ def run(args) -> dict:
     sampler = hw.Sampler(adc, args.rate, **timing)
     meta = _meta(args, inputs, speed, cfg)
     recorder = _open_recorder(hw, args, inputs, meta, timing)
-    online = hw.OnlineClassifier(model, hop_s=args.hop, speed_mps=speed)
+    volts = getattr(model, "channel", None) in ("voltage", "volts")
+    lsb = cfg.fsr_v / 32768 if volts else 1.0
+    limits = (-cfg.fsr_v, cfg.fsr_v) if volts else (-32768, 32767)
+    quiet = args.stopped_below * lsb if args.stopped_below > 0 else None
+    online = hw.OnlineClassifier(model, hop_s=args.hop, speed_mps=speed, limits=limits,
+                                 quiet_std=quiet)  # fmt: skip
     online.warm_up()  # compile (or load from the cache) before the first sample
     sink = None if labels_to is None else hw.LabelSink(labels_to)
     summary = hw.StreamSummary()
@@ -311,6 +324,8 @@ MAX_UP_FRONT_S = 600.0
 
 def _check_numbers(args) -> None:
     """Refuse NaN, infinities and non-positive values (argparse's float takes 'nan', 'inf')."""
+    if not (math.isfinite(args.stopped_below) and args.stopped_below >= 0):
+        raise CommandError(f"--stopped-below {args.stopped_below!r} must be a number >= 0")
     for flag, value in (("--duration", args.duration), ("--rate", args.rate),
                         ("--hop", args.hop)):  # fmt: skip
         if value is not None and not (math.isfinite(value) and value > 0):
