@@ -1,7 +1,7 @@
 """Fitting the model to recordings: least squares, calibration, window fits, start values.
 
 The fit problem is public, so that other packages (the posterior) build on it:
-:class:`FitProblem` (built from a record and :class:`Observation` s) gives the whisker at a
+:class:`FitProblem` (built from a record and :class:`Observation` objects) gives the whisker at a
 parameter pytree, each recording's design columns ``(D, g)``, the residuals
 (:func:`residuals` in optimistix's ``fn(y, args)`` form), the parameter flattening and the
 reported quantities; :func:`start_values`, :func:`solve` and :func:`covariance` are the
@@ -29,6 +29,7 @@ from ._observation import CalibrationError as CalibrationError
 from ._observation import Observation as Observation
 from ._observation import StaticTest as StaticTest
 from ._observation import observation_from_recording as observation_from_recording
+from ._observation import observations_from_recording as observations_from_recording
 from ._observation import read_static_test as read_static_test
 from ._observation import release_time as release_time
 from ._observation import sha256_of as sha256_of
@@ -42,6 +43,9 @@ from ._problem import recording_design as recording_design
 from ._problem import reported_names as reported_names
 from ._problem import residuals as residuals
 from ._problem import solve as solve
+from ._release import Decay as Decay
+from ._release import find_decays as find_decays
+from ._release import steady_line as steady_line
 from ._signal import Peak as Peak
 from ._signal import amplitude_spectrum as amplitude_spectrum
 from ._signal import dominant_peaks as dominant_peaks

@@ -88,6 +88,14 @@ def covariance(fn, y, args=None) -> tuple[jax.Array, jax.Array]:
 
     ``Σ = s² (JᵀJ)⁻¹`` with ``s² = ‖r‖²/(n − p)``; ``y`` must be a flat 1-D array.
 
+    ``JᵀJ`` is never formed: its condition number is the square of ``J``'s, and the
+    parameters of a whisker fit span many orders of magnitude (a log-stiffness next to a
+    damping ratio and amplitudes), so a pseudo-inverse of ``JᵀJ`` would drop well-determined
+    directions as if they were rounding noise. Instead ``J``'s columns are scaled to unit
+    norm, ``J D⁻¹ = U S Vᵀ`` (SVD), and ``Σ = s² D⁻¹ V S⁻² Vᵀ D⁻¹``; only directions whose
+    singular value is below ``max(n, p)·eps`` of the largest (truly undetermined) are left
+    out, as a pseudo-inverse does.
+
     Returns:
         ``(covariance, s²)``.
     """
@@ -95,7 +103,18 @@ def covariance(fn, y, args=None) -> tuple[jax.Array, jax.Array]:
     jac = jax.jacfwd(lambda p: fn(p, args))(y)
     n, p = r.size, y.size
     s2 = jnp.sum(r**2) / max(n - p, 1)
-    return s2 * jnp.linalg.pinv(jac.T @ jac, hermitian=True), s2
+    return s2 * scaled_inverse_gram(jac), s2
+
+
+def scaled_inverse_gram(jac: jax.Array) -> jax.Array:
+    """``(JᵀJ)⁺`` through the SVD of ``J`` with unit-norm columns (see :func:`covariance`)."""
+    norms = jnp.linalg.norm(jac, axis=0)
+    d = jnp.where(norms > 0, norms, 1.0)
+    _, s, vt = jnp.linalg.svd(jac / d, full_matrices=False)
+    cut = s[0] * max(jac.shape) * jnp.finfo(jac.dtype).eps
+    inv_s2 = jnp.where(s > cut, 1.0 / jnp.where(s > cut, s, 1.0) ** 2, 0.0)
+    w = vt.T / d[:, None]
+    return (w * inv_s2) @ w.T
 
 
 def gradient_cosine(fn, y, args=None) -> jax.Array:

@@ -11,6 +11,7 @@ import numpy as np
 from .._choices import EXCITATIONS, OBSERVABLES
 from ..io import Recording, RecordingError, check_samples
 from ..model import WhiskerRecord
+from ._release import find_decays, steady_line
 
 G0 = 9.80665  # m/s² per g
 
@@ -40,6 +41,7 @@ class Observation:
             with the excitation amplitude).
         name: Label used in reports.
         source: File it came from (hashed into the record), if any.
+        selection: How the samples were chosen (for reports), e.g. where a decay was found.
     """
 
     t: np.ndarray
@@ -53,6 +55,7 @@ class Observation:
     gain: float | None = 1.0
     name: str = "recording"
     source: str | None = None
+    selection: str | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "t", np.asarray(self.t, dtype=float))
@@ -153,11 +156,6 @@ def sha256_of(path: str | Path) -> str:
     return h.hexdigest()
 
 
-def release_time(t: np.ndarray, y: np.ndarray) -> float:
-    """When a pluck was released: the sample of largest deviation from the median."""
-    return float(t[int(np.argmax(np.abs(y - np.median(y))))])
-
-
 def nominal_gain(record: WhiskerRecord, observable: str) -> float:
     """Observed units per physical unit from the record (V/m, codes/m) or 1."""
     g = float(record.hall.gain_v_per_m)
@@ -201,8 +199,9 @@ def observation_from_recording(
             by default.
         fit_gain: Fit the sensor gain (as a product with the excitation amplitude).
         gain_known: Take a voltage's or ADC's gain from the record instead of fitting it.
-        t_start: Use samples from this time (s); for a decay the release is detected
-            (:func:`release_time`) when None.
+        t_start: Use samples from this time (s); for a decay the free decay is found
+            (:func:`whiskerid.fit.find_decays`) when None: the first one, see
+            :func:`observations_from_recording` for all of them.
         t_end: Use samples up to this time (s).
 
     Raises:
@@ -227,9 +226,7 @@ def observation_from_recording(
         * (G0 if units_g or rec.meta.get("units") == "g" else 1.0)
     )
     if excitation == "auto":
-        excitation = "base" if base_col else rec.meta.get("excitation", "decay")
-        if excitation not in EXCITATIONS:
-            excitation = "decay"
+        excitation = _excitation(rec, base_col, y, path)
     fb = fb_hz if fb_hz is not None else _meta_float(rec, "fb_hz")
     hb = hb_m if hb_m is not None else _meta_float(rec, "hb_m")
     base_acc = None
@@ -264,11 +261,100 @@ def observation_from_recording(
         source=None if rec.source is None else str(rec.source),
     )
     if t_start is None and excitation == "decay":
-        t_start = release_time(obs.t, obs.y)
+        return _decay_windows(obs, t_end, path, first_only=True)[0]
+    return _cut(obs, t_start, t_end, path)
+
+
+def observations_from_recording(
+    rec: Recording, record: WhiskerRecord, **options
+) -> list[Observation]:
+    """Like :func:`observation_from_recording`, but one :class:`Observation` per free decay
+    when the recording holds several plucks (and ``t_start`` is not given).
+
+    A decay recording yields its decays as :func:`whiskerid.fit.find_decays` finds them,
+    each named ``FILE#k`` with its window in ``Observation.selection``; they are meant to be
+    calibrated jointly (shared κ and ζ, their own amplitudes and offsets). Any other
+    recording yields one observation.
+
+    Raises:
+        CalibrationError: As :func:`observation_from_recording`; also a decay recording in
+            which no free decay is found.
+    """
+    t_start = options.pop("t_start", None)
+    t_end = options.pop("t_end", None)
+    obs = observation_from_recording(rec, record, t_start=rec.t[0], **options)
+    path = rec.source or "recording"
+    if t_start is None and obs.excitation == "decay":
+        return _decay_windows(obs, t_end, path, first_only=False)
+    return [_cut(obs, t_start, t_end, path)]
+
+
+def _cut(obs: Observation, t_start, t_end, path) -> Observation:
     obs = obs.window(t_start, t_end)
     if obs.t.size < 16:
         raise RecordingError(f"{path}: only {obs.t.size} samples between --t-start and --t-end")
     return obs
+
+
+def _decay_windows(obs: Observation, t_end, path, *, first_only: bool) -> list[Observation]:
+    """The free decays of a decay recording, each as its own observation."""
+    if t_end is not None:
+        obs = obs.window(None, t_end)
+    decays = [
+        d
+        for d in find_decays(obs.t, obs.y)
+        if np.sum((obs.t >= d.start_s) & (obs.t <= d.end_s)) >= 16
+    ]
+    if not decays:
+        f = steady_line(obs.t, obs.y)
+        hint = (
+            f" It looks like a steady sine at {f:.4g} Hz: give --excitation sine --fb {f:.4g}."
+            if f is not None
+            else " Give --t-start at the release, or the right --excitation."
+        )
+        raise CalibrationError(f"{path}: no free decay (a pluck or tap ringing down) found.{hint}")
+    decays = decays[:1] if first_only else decays
+    out = []
+    for k, d in enumerate(decays):
+        name = obs.name if len(decays) == 1 else f"{obs.name}#{k + 1}"
+        o = obs.window(d.start_s, d.end_s)
+        out.append(_replace(o, name=name, selection=f"decay {d.describe()}"))
+    return out
+
+
+def release_time(t: np.ndarray, y: np.ndarray) -> float:
+    """When the first free decay in ``(t, y)`` starts (s): see :func:`whiskerid.fit.find_decays`.
+
+    Raises:
+        CalibrationError: No free decay is found.
+    """
+    decays = find_decays(t, y)
+    if not decays:
+        raise CalibrationError("no free decay (a pluck or tap ringing down) found")
+    return decays[0].start_s
+
+
+def _excitation(rec: Recording, base_col, y, path) -> str:
+    """The excitation of a recording: its metadata, ``base`` with a base column, else told
+    from the data (a steady line is a sine, which needs its frequency: refused)."""
+    if base_col:
+        return "base"
+    meta = rec.meta.get("excitation")
+    if meta is not None:
+        if meta not in EXCITATIONS:
+            raise CalibrationError(
+                f"{path}: excitation {meta!r} in the metadata is not one of {EXCITATIONS}; "
+                "give --excitation"
+            )
+        return meta
+    f = steady_line(rec.t, y)
+    if f is not None:
+        raise CalibrationError(
+            f"{path}: the recording does not say its excitation, and it holds a steady line at "
+            f"{f:.4g} Hz that does not decay, like a sine base excitation: give --excitation "
+            f"sine --fb <drive frequency in Hz> (and --hb if known), or --excitation decay"
+        )
+    return "decay"
 
 
 def _observable(observable: str, rec: Recording, col: str) -> str:

@@ -8,6 +8,9 @@ from ._modes import cantilever_roots as cantilever_roots
 from ._modes import mode_shape as mode_shape
 from ._modes import participation_factors as participation_factors
 from ._paper import paper_eq1 as paper_eq1
+from ._pluck import PLUCK_KINDS as PLUCK_KINDS
+from ._pluck import PluckTruth as PluckTruth
+from ._pluck import simulate_pluck as simulate_pluck
 from ._record import RecordError as RecordError
 from ._record import WhiskerRecord as WhiskerRecord
 from ._record import load_record as load_record

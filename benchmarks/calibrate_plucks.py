@@ -1,0 +1,171 @@
+"""Calibration of hand-made plucks: how often f_1 and ζ come out right, and whether a wrong
+answer is ever reported ``ok``.
+
+Each case simulates a pluck (:func:`whiskerid.model.simulate_pluck`: the exact model with
+all of the record's modes, the Hall sensor and the ADS1115 with its conversion averaging,
+clipping and quantisation, white noise) for a whisker whose f_1 is 0.5× to 2× the record's
+and whose ζ is 0.005 to 0.15, then calibrates it exactly as ``whiskerid calibrate`` does,
+with the *nominal* record and nothing else (release detection included). A case is right
+when f_1 is within 0.5 % and ζ within 10 % of the truth.
+
+Usage::
+
+    python benchmarks/calibrate_plucks.py [--quick] [--out results.json]
+
+Prints one JSON object: the fraction right, the wrong fits reported ok, per-kind figures and
+the failing cases.
+"""
+
+import argparse
+import itertools
+import json
+import sys
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from whiskerid.fit import calibrate, observations_from_recording
+from whiskerid.model import paper_record, simulate_pluck
+
+KINDS = ("held", "flick", "tap", "late", "multi", "clipped")
+
+
+def case_record(f1_factor: float, zeta: float, rate_hz: float):
+    """The paper whisker with f_1 scaled (through the shear modulus) and damping ζ; the ADC
+    at its fastest rate for sampling above 475 Hz."""
+    base = paper_record()
+    s = base.structure
+    structure = replace(s, shear_modulus_pa=s.shear_modulus_pa * f1_factor**2)
+    dr = 860 if rate_hz > 475 else 475
+    return base, base.replace(
+        structure=structure, zeta=zeta, adc=replace(base.adc, data_rate_sps=dr)
+    )
+
+
+def make_case(kind, f1_factor, zeta, rate_hz, seed):
+    nominal, truth = case_record(f1_factor, zeta, rate_hz)
+    f1 = float(truth.whisker().natural_frequencies_hz[0])
+    # long enough for the decay to fall to ~1 % (at least 1 s, at most 6 s)
+    decay_s = float(np.clip(4.6 / (2 * np.pi * f1 * zeta), 0.3, 5.0))
+    rng = np.random.default_rng(seed)
+    opts = dict(
+        observable="adc",
+        rate_hz=rate_hz,
+        hold_s=float(rng.uniform(0.1, 1.0)),
+        drift=float(rng.uniform(-0.05, 0.05)),
+        tremor=float(rng.uniform(0.0, 0.02)),
+        noise_db=float(rng.uniform(30, 45)),
+        seed=seed,
+    )
+    if kind == "multi":
+        opts.update(kind="held", n_plucks=3, gap_s=decay_s)
+        duration = 0.4 + 3 * (decay_s + 0.1 + opts["hold_s"]) + 0.1
+    elif kind == "clipped":
+        # the Hall offset near the top rail: the first cycles clip
+        truth = truth.replace(hall=replace(truth.hall, offset_v=2.04))
+        nominal = nominal.replace(hall=truth.hall, adc=replace(nominal.adc, fsr_v=2.048))
+        truth = truth.replace(adc=replace(truth.adc, fsr_v=2.048))
+        opts.update(kind="held", tip_deflection_m=1.5e-3)
+        duration = 0.5 + opts["hold_s"] + 0.1 + decay_s
+    else:
+        opts["kind"] = kind
+        duration = 0.5 + opts["hold_s"] + 0.1 + decay_s
+    opts["release_s"] = 0.4 + (
+        opts["hold_s"] + 0.1 if kind in ("held", "multi", "clipped") else 0.1
+    )
+    rec, where = simulate_pluck(truth, duration_s=duration, **opts)
+    return nominal, rec, f1, where
+
+
+def run_case(kind, f1_factor, zeta, rate_hz, seed):
+    nominal, rec, f1, where = make_case(kind, f1_factor, zeta, rate_hz, seed)
+    t0 = time.perf_counter()
+    try:
+        obs = observations_from_recording(rec, nominal, observable="adc")
+        cal = calibrate(nominal, obs)
+        f1_fit = cal.params["f1_hz"]["value"]
+        z_fit = cal.params["zeta"]["value"]
+        status = cal.status
+        starts = [o.t[0] for o in obs]
+    except Exception as e:  # a refusal is an answer too: not ok, not right
+        f1_fit = z_fit = float("nan")
+        status = f"error: {e}"
+        starts = []
+    right = abs(f1_fit / f1 - 1) <= 0.005 and abs(z_fit / zeta - 1) <= 0.10
+    return {
+        "kind": kind,
+        "f1_factor": f1_factor,
+        "zeta": zeta,
+        "rate_hz": rate_hz,
+        "seed": seed,
+        "f1_true": f1,
+        "f1_fit": f1_fit,
+        "zeta_fit": z_fit,
+        "status": status,
+        "right": bool(right),
+        "ok": status == "ok",
+        "release_true": list(where.releases_s),
+        "start_found": [float(s) for s in starts],
+        "seconds": time.perf_counter() - t0,
+    }
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--quick", action="store_true", help="a small grid (CI-sized)")
+    ap.add_argument("--out", help="also write the per-case results here (JSON)")
+    args = ap.parse_args(argv)
+    if args.quick:
+        grid = itertools.product(KINDS, (0.5, 2.0), (0.005, 0.15), (860.0,))
+    else:
+        grid = itertools.product(KINDS, (0.5, 0.8, 1.0, 1.4, 2.0), (0.005, 0.02, 0.07, 0.15),
+                                 (200.0, 860.0))  # fmt: skip
+    results = []
+    for k, (kind, ff, z, rate) in enumerate(grid):
+        results.append(run_case(kind, ff, z, rate, seed=k))
+        r = results[-1]
+        print(f"{kind:8s} f1x{ff:<4} zeta {z:<6} {rate:4.0f} Hz: f1 {r['f1_fit']:.4g}/"
+              f"{r['f1_true']:.4g} zeta {r['zeta_fit']:.3g} {r['status'][:40]}"
+              f"{'' if r['right'] else '  WRONG'}", file=sys.stderr)  # fmt: skip
+    n = len(results)
+    summary = {
+        "cases": n,
+        "fraction_right": sum(r["right"] for r in results) / n,
+        "wrong_reported_ok": sum(r["ok"] and not r["right"] for r in results),
+        "right_not_ok": sum(r["right"] and not r["ok"] for r in results),
+        "per_kind": {
+            k: {
+                "cases": sum(r["kind"] == k for r in results),
+                "right": sum(r["right"] for r in results if r["kind"] == k),
+                "ok": sum(r["ok"] for r in results if r["kind"] == k),
+            }
+            for k in KINDS
+        },
+        "median_seconds_per_fit": float(np.median([r["seconds"] for r in results])),
+        "failures": [
+            {
+                k: r[k]
+                for k in (
+                    "kind",
+                    "f1_factor",
+                    "zeta",
+                    "rate_hz",
+                    "f1_fit",
+                    "f1_true",
+                    "zeta_fit",
+                    "status",
+                )
+            }
+            for r in results
+            if not r["right"]
+        ],
+    }
+    if args.out:
+        with open(args.out, "w") as fh:
+            json.dump(results, fh, indent=1)
+    print(json.dumps(summary, indent=1))
+
+
+if __name__ == "__main__":
+    main()
