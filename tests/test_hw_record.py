@@ -170,12 +170,13 @@ def test_record_two_inputs_each_with_its_own_time(tmp_path, two_plane, capsys):
 def test_record_one_input_at_the_chips_fastest_rate(tmp_path, two_plane, capsys):
     out = tmp_path / "fast.csv"
     argv = ["record", str(out), "--rate", "860", "--emulate", str(two_plane), "--fast",
-            "--duration", "1", "--json"]  # fmt: skip
+            "--duration", "1", "--json", "--speed", "0.3"]  # fmt: skip
     assert main(argv) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["mode"] == "continuous" and 855 <= summary["rows"] <= 860
     rec = wi.read_recording(out)
     assert rec.meta["units"] == "code" and list(rec.columns) == ["A0"]
+    assert rec.meta["speed_mps"] == "0.3"  # for train and classify
     assert np.median(np.diff(rec.t)) == pytest.approx(1 / 860, rel=1e-3)
 
 

@@ -7,8 +7,11 @@ from pathlib import Path
 
 from ._common import CommandError, HelpFormatter
 
-#: Seconds of rest before an emulated pluck is released (so its release can be detected).
+#: When an emulated pluck is released (s): held bent by hand before, so its release is found
+#: as in a real recording.
 PLUCK_DELAY_S = 0.5
+#: Longest emulated pluck simulated (s); the whisker is at rest after it.
+PLUCK_SPAN_S = 10.0
 
 
 def add_parser(sub) -> None:
@@ -160,20 +163,19 @@ def _sources(inputs, args) -> list:
 
 
 def _pluck(args):
-    """The Hall voltage of the whisker released from a tip deflection at PLUCK_DELAY_S."""
-    import numpy as np
+    """The Hall voltage of the whisker held bent by hand and released at PLUCK_DELAY_S.
 
+    A pluck has rung down within seconds: longer recordings hold the rest value after it.
+    """
     from .. import hw
-    from ..model import simulate
+    from ..model import simulate_pluck
     from ._common import record_or_paper
 
-    record = record_or_paper(args.whisker)
-    length = (args.duration or 10.0) + 1.0
-    sim = simulate(record, excitation="decay", observable="voltage", rate_hz=20_000.0,
-                   duration_s=length, jitter_s=0.0, seed=args.seed)  # fmt: skip
-    t = np.concatenate([[0.0], sim.t + PLUCK_DELAY_S])
-    v = sim.signal()
-    return hw.source_from_recording(t, np.concatenate([[v[0]], v]))
+    length = min(args.duration or PLUCK_SPAN_S, PLUCK_SPAN_S) + 1.0
+    sim, _ = simulate_pluck(record_or_paper(args.whisker), kind="held", observable="voltage",
+                            rate_hz=20_000.0, duration_s=length, release_s=PLUCK_DELAY_S,
+                            noise_db=None, seed=args.seed)  # fmt: skip
+    return hw.source_from_recording(sim.t, sim.signal())
 
 
 def _terrain(args, terrain: str, j: int):
