@@ -540,8 +540,8 @@ def terrain_source(record, terrain: str, speed_mps: float, duration_s: float | N
     emulated ADS1115 then does the averaging, clipping and quantisation itself.
 
     With ``duration_s`` None the terrain never ends: it is made ``chunk_s`` seconds at a time,
-    each chunk fresh terrain (its own seed), the next one made on a worker thread while the
-    current one plays, and successive chunks cross-faded over a second.
+    each chunk fresh terrain (its own seed), the next one made on a worker thread from the
+    middle of the current one on, and successive chunks cross-faded over a second.
     """
     if duration_s is not None:
         return _terrain_chunk(record, terrain, speed_mps, duration_s, seed, amplifier)
@@ -581,27 +581,36 @@ class _EndlessTerrain:
         if k not in self._chunks:
             if self._ahead is not None and self._ahead[0] == k:
                 self._ahead[1].join()
-                self._chunks[k] = self._ahead[2][0]
+                made = self._ahead[2]
                 self._ahead = None
+                # A worker that failed left nothing: make it here, where an error is seen.
+                self._chunks[k] = made[0] if made else self._make(k)
             else:
                 self._chunks[k] = self._make(k)
             for old in [j for j in self._chunks if j < k - 1]:
                 del self._chunks[old]  # memory stays at two chunks
+        return self._chunks[k]
+
+    def _prefetch(self, k: int) -> None:
+        """Start making chunk ``k + 1`` on a worker thread (halfway through chunk ``k``, so
+        that the start-up, busy compiling, is left alone)."""
         if self._ahead is None and k + 1 not in self._chunks:
             box: list = []
             thread = threading.Thread(target=lambda: box.append(self._make(k + 1)), daemon=True)
             thread.start()
             self._ahead = (k + 1, thread, box)
-        return self._chunks[k]
 
     def _play(self, k: int, t: np.ndarray) -> np.ndarray:
-        # Chunk k's own time 0 is at stream time k C - FADE: its start-up is over by k C.
+        # Chunk k's own time 0 is at stream time k C - 2 FADE: its start-up from rest is
+        # over a second before it fades in at k C.
         return np.asarray(self._chunk(k)(t - k * self.chunk_s + 2 * _FADE_S))
 
     def __call__(self, t_s):
         t = np.asarray(t_s, dtype=np.float64)
         k = int(np.floor(float(np.mean(t)) / self.chunk_s))
         v = self._play(k, t)
+        if float(np.mean(t)) - k * self.chunk_s > self.chunk_s / 2:
+            self._prefetch(k)
         into = (t - k * self.chunk_s) / _FADE_S
         if k > 0 and float(np.min(into)) < 1.0:
             w = np.clip(into, 0.0, 1.0)
