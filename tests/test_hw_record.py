@@ -240,3 +240,24 @@ def test_a_bus_error_of_another_type_is_retried_like_an_oserror():
     chip.fail_next(4, KeyError("odd"))
     with pytest.raises(I2CError, match="KeyError"):
         adc.read()
+
+
+@pytest.mark.slow
+def test_a_pluck_recorded_fast_calibrates_to_the_truth(tmp_path, capsys):
+    """A held pluck of the paper whisker on the emulated chip, recorded with `record` at
+    500 Hz (above twice the second mode's alias-free limit for the first), calibrates with
+    `calibrate` as it is: the file needs no conversion."""
+    rec, out = tmp_path / "pluck.csv", tmp_path / "fit.toml"
+    whisker = tmp_path / "paper.toml"
+    wi.paper_record().save(whisker)
+    argv = ["record", str(rec), "--emulate", "pluck", "--rate", "500", "--duration", "2",
+            "--fast"]  # fmt: skip
+    assert main(argv) == 0
+    assert main(["calibrate", str(rec), "--whisker", str(whisker), "--out", str(out),
+                 "--json"]) == 0  # fmt: skip
+    fit = json.loads(capsys.readouterr().out)
+    truth = wi.paper_record()
+    assert fit["params"]["f1_hz"]["value"] == pytest.approx(
+        float(truth.whisker().natural_frequencies_hz[0]), abs=0.05
+    )
+    assert fit["params"]["zeta"]["value"] == pytest.approx(float(truth.zeta), rel=0.03)
