@@ -50,8 +50,8 @@ def add_parser(sub) -> None:
         "--replay",
         type=Path,
         metavar="REC",
-        help="emulate the chip, fed by this recording (volts or ADC codes): a model "
-        "checked on your own data exactly as it runs online",
+        help="emulate the chip, fed by this recording (volts or ADC codes) for its length "
+        "or --duration: a model checked on your own data exactly as it runs online",
     )
     p.add_argument(
         "--address",
@@ -144,6 +144,8 @@ def run(args) -> dict:
         from ..io import read_recording
 
         replayed = read_recording(args.replay)
+        if args.duration is None:  # the recording's length: after it there is no signal
+            args.duration = float(replayed.t[-1] - replayed.t[0])
     speed = _speed(args, replayed)
     bus = _bus(hw, args, inputs, replayed, timing)
     n = len(inputs)
