@@ -6,6 +6,11 @@ achieved rate and drift, inter-sample jitter, gaps, overruns, memory growth and 
 
     python benchmarks/stream.py --duration 20
     python benchmarks/stream.py --duration 600 --model MODEL --terrain brick
+    python benchmarks/stream.py --duration 60 --inputs A0,A1 --model MODEL
+
+With ``--inputs A0,A1`` the inputs are read round-robin (one single-shot conversion each, the
+data rate chosen to fit a slot); jitter and drift are then per slot of ``1 / (inputs rate)``,
+and the JSON gains each input's achieved rate and the interleave offset between inputs.
 
 With ``--model`` (a folder from ``whiskerid train``) every sample also goes through the
 online classifier (ring buffer, a window every ``--hop`` s, features + MLP) as
@@ -31,7 +36,15 @@ import sys
 import time
 
 import numpy as np
-from whiskerid.hw import ADS1115, Config, EmulatedADS1115, Sampler
+from whiskerid.hw import (
+    ADS1115,
+    Config,
+    EmulatedADS1115,
+    InputScan,
+    Sampler,
+    data_rate_for,
+    parse_inputs,
+)
 
 
 def rss_kib() -> float:
@@ -57,6 +70,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--noise", type=float, default=1e-4, help="input noise in volts RMS")
     p.add_argument("--clock-error", type=float, default=0.03, help="oscillator error fraction")
     p.add_argument("--spin", type=float, default=0.0, help="busy-wait before deadlines (s)")
+    p.add_argument("--inputs", default="A0", help="inputs read round-robin (A0 or A0,A1)")
     p.add_argument("--model", help="trained model folder: classify online as well")
     p.add_argument("--terrain", default="brick", help="simulated terrain fed with --model")
     p.add_argument("--speed", type=float, default=0.2, help="robot speed with --model (m/s)")
@@ -104,23 +118,37 @@ def main(argv: list[str] | None = None) -> int:
         worker = BackgroundClassifier(online, on_label).start()
 
     # A short transfer log: the emulator's log is test equipment, not part of the Pi's path.
+    inputs = parse_inputs(args.inputs)
+    n_in = len(inputs)
+    # Every input gets the same signal, delayed by a quarter period per input.
+    sources = [(lambda t, j=j: sine(np.asarray(t) + j / (4 * args.signal_hz))) for j in range(n_in)]
     emu = EmulatedADS1115(
-        sine, noise_v=args.noise, clock_error=args.clock_error, seed=0, log_limit=64
+        sources, noise_v=args.noise, clock_error=args.clock_error, seed=0, log_limit=64
     )
-    cfg = Config(mux="AIN0_GND", fsr_v=4.096, data_rate_sps=args.data_rate)
-    adc = ADS1115(emu, config=cfg)
-    capacity = math.ceil(args.duration * args.rate) + 16
+    data_rate = args.data_rate if n_in == 1 else data_rate_for(1 / (n_in * args.rate))
+    cfg = Config(mux=inputs[0].mux, fsr_v=4.096, data_rate_sps=data_rate)
+    if n_in == 1:
+        adc = ADS1115(emu, config=cfg)
+        driver = adc
+    else:
+        adc = InputScan(emu, inputs, config=cfg)
+        driver = adc.chips[0]
+    capacity = math.ceil(args.duration * args.rate * n_in) + 16
     read_ns = np.zeros(capacity, dtype=np.int64)
 
     class TimedADC:
         """Times each read (the conversion wait plus the driver's overhead)."""
 
         calls = 0
+        n_inputs = n_in
 
         def read(self) -> int:
+            return self.read_input(0)
+
+        def read_input(self, j: int) -> int:
             t0 = time.monotonic_ns()
             try:
-                return adc.read()
+                return adc.read_input(j) if n_in > 1 else adc.read()
             finally:
                 if self.calls < capacity:
                     read_ns[self.calls] = time.monotonic_ns() - t0
@@ -135,8 +163,10 @@ def main(argv: list[str] | None = None) -> int:
     # lives on: growth then shows leaks in the read path, not the benchmark's bookkeeping.
     t = np.zeros(capacity)
     codes = np.zeros(capacity, dtype=np.int64)
+    chan = np.zeros(capacity, dtype=np.int64)
     t.fill(1.0)
     codes.fill(1)
+    chan.fill(1)
     n = 0
     warmup = min(capacity, round(args.rate))  # memory baseline after the first second too
     rss_warm = blocks_warm = None
@@ -151,8 +181,10 @@ def main(argv: list[str] | None = None) -> int:
     wall0, cpu0 = time.perf_counter(), time.process_time()
     for sample in sampler.samples(duration_s=args.duration):
         if n < capacity:
-            t[n], codes[n] = sample.t_s, sample.code
+            t[n], codes[n], chan[n] = sample.t_s, sample.code, sample.channel
             n += 1
+        if sample.channel != 0:
+            continue
         if online is not None and (w := online.cut(sample.t_s, sample.code)) is not None:
             if worker is not None:
                 worker.submit(w)
@@ -170,8 +202,8 @@ def main(argv: list[str] | None = None) -> int:
     rss_end, blocks_end = rss_kib(), sys.getallocatedblocks()
     read_ms = read_ns[: min(timed.calls, capacity)] * 1e-6
 
-    t, codes = t[:n], codes[:n]
-    period = 1.0 / args.rate
+    t, codes, chan = t[:n], codes[:n], chan[:n]
+    period = 1.0 / (args.rate * n_in)  # one slot
     slots = np.rint(t / period).astype(np.int64)
     consecutive = np.diff(slots) == 1
     dt = np.diff(t)[consecutive]
@@ -191,10 +223,16 @@ def main(argv: list[str] | None = None) -> int:
         "wall_s": round(wall, 3),
         "nominal_rate_hz": args.rate,
         "achieved_rate_hz": round(n / args.duration, 4),
+        "inputs": [i.name for i in inputs],
+        "data_rate_sps": data_rate,
+        "achieved_rate_per_input_hz": [
+            round(int(np.count_nonzero(chan == j)) / args.duration, 4) for j in range(n_in)
+        ],
+        "interleave_ms": _interleave(t, slots, n_in),
         "schedule_rate_hz": round(1.0 / slope, 6) if n > 2 else None,
         "drift_fraction": float(f"{slope / period - 1.0:.3e}") if n > 2 else None,
         "samples": n,
-        "expected_samples": math.ceil(args.duration * args.rate),
+        "expected_samples": math.ceil(args.duration * args.rate) * n_in,
         "jitter_us": {
             "p50": round(float(np.percentile(jitter_us, 50)), 2) if dt.size else None,
             "p99": round(float(np.percentile(jitter_us, 99)), 2) if dt.size else None,
@@ -208,7 +246,7 @@ def main(argv: list[str] | None = None) -> int:
         "timeouts": stats.timeouts,
         "overruns": stats.overruns,
         "skipped_slots": stats.skipped_slots,
-        "driver": {"reads": adc.stats.reads, "i2c_errors": adc.stats.i2c_errors},
+        "driver": {"reads": driver.stats.reads, "i2c_errors": driver.stats.i2c_errors},
         "read_ms": {
             "p50": round(float(np.percentile(read_ms, 50)), 3) if read_ms.size else None,
             "p99": round(float(np.percentile(read_ms, 99)), 3) if read_ms.size else None,
@@ -269,6 +307,21 @@ class _Slower:
         while time.perf_counter() < end:
             pass
         return self._model.window_proba(samples, speed)
+
+
+def _interleave(t: np.ndarray, slots: np.ndarray, n_in: int) -> dict | None:
+    """Time from input 0 to input 1 within a round (ms), where both were read."""
+    if n_in < 2:
+        return None
+    first = {int(s) // n_in: x for s, x in zip(slots, t, strict=True) if s % n_in == 0}
+    gaps = [x - first[int(s) // n_in] for s, x in zip(slots, t, strict=True)
+            if s % n_in == 1 and int(s) // n_in in first]  # fmt: skip
+    ms = np.array(gaps) * 1e3
+    if not ms.size:
+        return None
+    return {
+        q: round(float(np.percentile(ms, v)), 3) for q, v in (("p1", 1), ("p50", 50), ("p99", 99))
+    }
 
 
 def _latency(seconds: np.ndarray) -> dict | None:

@@ -28,18 +28,34 @@ from ._ads1115 import encode_config as encode_config
 from ._ads1115 import open_bus as open_bus
 from ._ads1115 import volts_to_code as volts_to_code
 from ._emulator import EmulatedADS1115 as EmulatedADS1115
+from ._emulator import EmulatedBus as EmulatedBus
 from ._emulator import FakeClock as FakeClock
+from ._emulator import replay_sources as replay_sources
 from ._emulator import source_from_recording as source_from_recording
+from ._inputs import INPUT_MUX as INPUT_MUX
+from ._inputs import Input as Input
+from ._inputs import InputScan as InputScan
+from ._inputs import Rounds as Rounds
+from ._inputs import data_rate_for as data_rate_for
+from ._inputs import emulated_bus as emulated_bus
+from ._inputs import max_scan_rate_hz as max_scan_rate_hz
+from ._inputs import parse_inputs as parse_inputs
+from ._live import LabelSink as LabelSink
+from ._live import SpeedFeed as SpeedFeed
+from ._live import odometry_speed as odometry_speed
+from ._live import parse_endpoint as parse_endpoint
 from ._recorder import CSVRecording as CSVRecording
 from ._recorder import Recorder as Recorder
 from ._recorder import read_recording_csv as read_recording_csv
 from ._recorder import unique_path as unique_path
+from ._sampler import Gap as Gap
 from ._sampler import Sample as Sample
 from ._sampler import Sampler as Sampler
 from ._sampler import SamplerStats as SamplerStats
 
 # The stream loop's public names, loaded on first use (PEP 562): they bring in JAX.
 _STREAM_NAMES = (
+    "FAULT_LABELS",
     "BackgroundClassifier",
     "OnlineClassifier",
     "PendingWindow",
@@ -64,6 +80,7 @@ def __dir__() -> list[str]:
 
 
 if TYPE_CHECKING:
+    from ._stream import FAULT_LABELS as FAULT_LABELS
     from ._stream import BackgroundClassifier as BackgroundClassifier
     from ._stream import OnlineClassifier as OnlineClassifier
     from ._stream import PendingWindow as PendingWindow

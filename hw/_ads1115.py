@@ -351,7 +351,7 @@ class ADS1115:
 
     The bus is passed in (an ``smbus2.SMBus``, an :class:`~whiskerid.hw.EmulatedADS1115`, ...)
     and never opened or closed here, so tests and several chips can share one. Every transfer
-    is retried on ``OSError``; every wait for a conversion has a timeout.
+    is retried on any error of the bus; every wait for a conversion has a timeout.
 
     Args:
         bus: smbus2-like object with ``write_i2c_block_data`` and ``read_i2c_block_data``.
@@ -359,7 +359,7 @@ class ADS1115:
         config: Configuration; defaults to :data:`DEFAULT_CONFIG`. Its ``os`` bit is ignored.
         timeout_s: Longest wait for one conversion in seconds; default twice the nominal
             conversion time plus 5 ms (covers the +-10% oscillator and scheduling delays).
-        retries: Extra attempts per I2C transfer after an ``OSError``.
+        retries: Extra attempts per I2C transfer after a failure.
         retry_delay_s: Pause before each retry in seconds (lets a glitching bus settle).
         poll_interval_s: Pause between conversion-ready polls in seconds.
         ready_pin: Optional callable returning True while ALERT/RDY is asserted (for the
@@ -431,16 +431,22 @@ class ADS1115:
     # -- register access --
 
     def _transfer(self, what: str, fn: Callable[[], Any]) -> Any:
-        """Run one I2C transfer, retrying ``OSError`` up to ``retries`` times."""
+        """Run one I2C transfer, retrying a failure up to ``retries`` times.
+
+        Any exception of the bus counts as a failed transfer, not only ``OSError``: bus
+        libraries and their wrappers raise other types on a glitch, and a service that runs
+        for months must treat those alike (retried, then an :class:`I2CError`).
+        """
         for attempt in range(self.retries + 1):
             try:
                 return fn()
-            except OSError as e:
+            except Exception as e:
                 self.stats.i2c_errors += 1
                 if attempt == self.retries:
+                    kind = "" if isinstance(e, OSError) else f"{type(e).__name__}: "
                     raise I2CError(
                         f"ADS1115 at {self.address:#04x}: {what} failed after "
-                        f"{attempt + 1} attempt(s): {e}"
+                        f"{attempt + 1} attempt(s): {kind}{e}"
                     ) from e
                 self.stats.retries += 1
                 self._sleep(self.retry_delay_s)

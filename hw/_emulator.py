@@ -135,6 +135,37 @@ def source_from_recording(
     return source
 
 
+def replay_sources(
+    rec: str | os.PathLike[str] | Recording, names: Sequence[str], *, fsr_v: float | None = None
+) -> list[Source]:
+    """One source per input name, replaying a recording through the emulated chip.
+
+    Each input plays the column of its own name (at its own times, ``t_<name>``), else the
+    first column. A recording in ADC codes (``units: code``, what the stream and
+    ``whiskerid record`` write by default) is turned back into volts with its ``fsr_v``
+    metadata (or ``fsr_v``, default the driver's 4.096 V), so the chip reads the same codes.
+
+    Raises:
+        ValueError: Units other than volts or codes.
+    """
+    if not isinstance(rec, Recording):
+        rec = read_recording(rec)
+    units = rec.meta.get("units", "V")
+    scale = 1.0
+    if units == "code":
+        scale = float(rec.meta.get("fsr_v", fsr_v or 4.096)) / 32768.0
+    elif units != "V":
+        raise ValueError(
+            f"{rec.source or 'recording'}: units are {units!r}; a replay needs volts or ADC codes"
+        )
+    out = []
+    for name in names:
+        column = name if name in rec.columns else None
+        t = rec.time_of(column)
+        out.append(source_from_recording(t, np.asarray(rec.signal(column)) * scale))
+    return out
+
+
 def _volts_of(rec: str | os.PathLike[str] | Recording, column: str | None):
     if not isinstance(rec, Recording):
         rec = read_recording(rec)
@@ -143,7 +174,7 @@ def _volts_of(rec: str | os.PathLike[str] | Recording, column: str | None):
             f"{rec.source or 'recording'}: units are {rec.meta['units']!r}; the emulated chip "
             "is fed volts (convert the column, e.g. with code_to_volts)"
         )
-    return rec.t, rec.signal(column)
+    return rec.time_of(column), rec.signal(column)
 
 
 def _zero(t_s: Any) -> Any:
@@ -182,6 +213,8 @@ class EmulatedADS1115:
         read_delay_s: Extra time each read transfer takes (fault injection).
         never_ready: If True, started conversions never finish (fault injection).
         stuck_code: If not None, the conversion register always reads this code.
+        error_rate: Fraction of transfers that fail at random (fault injection).
+        error: What a random failure raises (default ``OSError(121)``, a NACK).
     """
 
     def __init__(
@@ -224,6 +257,9 @@ class EmulatedADS1115:
         self.read_delay_s = 0.0
         self.never_ready = False
         self.stuck_code: int | None = None
+        self.error_rate = 0.0
+        self.error: BaseException | None = None
+        self._fault_rng = np.random.default_rng(None if seed is None else [seed, 1])
         self.closed = False
         self._faults: collections.deque[BaseException | None] = collections.deque()
         self.reset()
@@ -370,6 +406,8 @@ class EmulatedADS1115:
         if self._faults:
             exc = self._faults.popleft()
             raise exc if exc is not None else OSError(121, "Remote I/O error")
+        if self.error_rate > 0 and self._fault_rng.random() < self.error_rate:
+            raise self.error if self.error is not None else OSError(121, "Remote I/O error")
         if address != self.address:
             raise OSError(121, f"Remote I/O error (no device at {address:#04x})")
 
@@ -441,6 +479,46 @@ class EmulatedADS1115:
         self.closed = True
 
     def __enter__(self) -> EmulatedADS1115:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+
+class EmulatedBus:
+    """Several emulated chips on one I2C bus, each answering on its own address.
+
+    Args:
+        chips: The chips (:class:`EmulatedADS1115`), with distinct addresses.
+    """
+
+    def __init__(self, chips: Sequence[EmulatedADS1115]) -> None:
+        self.chips = {c.address: c for c in chips}
+        if len(self.chips) != len(chips):
+            raise ValueError("two emulated chips share an address")
+
+    def _chip(self, address: int) -> EmulatedADS1115:
+        chip = self.chips.get(address)
+        if chip is None:
+            raise OSError(121, f"Remote I/O error (no device at {address:#04x})")
+        return chip
+
+    def write_i2c_block_data(self, i2c_addr: int, register: int, data: Sequence[int],
+                             force: bool | None = None) -> None:  # fmt: skip
+        """Write to the chip at ``i2c_addr``."""
+        self._chip(i2c_addr).write_i2c_block_data(i2c_addr, register, data)
+
+    def read_i2c_block_data(self, i2c_addr: int, register: int, length: int,
+                            force: bool | None = None) -> list[int]:  # fmt: skip
+        """Read from the chip at ``i2c_addr``."""
+        return self._chip(i2c_addr).read_i2c_block_data(i2c_addr, register, length)
+
+    def close(self) -> None:
+        """Close every chip's bus."""
+        for chip in self.chips.values():
+            chip.close()
+
+    def __enter__(self) -> EmulatedBus:
         return self
 
     def __exit__(self, *exc_info: object) -> None:

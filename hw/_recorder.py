@@ -55,6 +55,9 @@ class Recorder:
         path: Output file. It must not exist unless ``overwrite`` is True.
         columns: Signal column names after ``t`` (``"voltage"`` matches the simulator's
             observable name for volts).
+        own_times: Give every column after the first its own timestamp column ``t_<name>``
+            (header ``t,A0,A1,t_A1``: ``t`` is the first column's time); write rows with
+            :meth:`write_round`. For inputs read one after the other.
         rate_hz: Nominal sample rate, written as metadata.
         units: Units of the signal columns, written as metadata.
         whisker: Optional whisker name or file, written as metadata.
@@ -74,6 +77,7 @@ class Recorder:
         units: str | None = "V",
         whisker: str | None = None,
         metadata: Mapping[str, Any] | None = None,
+        own_times: bool = False,
         sync_interval_s: float = 1.0,
         overwrite: bool = False,
         clock: Callable[[], int] = time.monotonic_ns,
@@ -85,6 +89,7 @@ class Recorder:
         ):
             raise ValueError(f"bad column names {self.columns!r}: need non-empty names without ',' "
                              "or newlines, other than 't'")  # fmt: skip
+        self.own_times = bool(own_times)
         self.path = Path(path)
         self.sync_interval_ns = round(sync_interval_s * 1e9)
         self.rows = 0
@@ -115,7 +120,10 @@ class Recorder:
             self.path, "w" if overwrite else "x", encoding="utf-8", newline=""
         )
         lines = [f"# {k}: {v}\n" for k, v in meta.items()]
-        lines.append(",".join(("t", *self.columns)) + "\n")
+        header = ["t", *self.columns]
+        if self.own_times:
+            header += [f"t_{c}" for c in self.columns[1:]]
+        lines.append(",".join(header) + "\n")
         self._file.write("".join(lines))
         self.sync()
         _fsync_dir(self.path.parent.resolve())
@@ -127,12 +135,29 @@ class Recorder:
             t_s: Seconds since the start of the recording.
             *values: One value per signal column.
         """
+        if self.own_times and len(self.columns) > 1:
+            raise ValueError("this recorder stamps each column: write rows with write_round")
+        self._row(f"{t_s:.9f},", values, "")
+
+    def write_round(self, times: Sequence[float], values: Sequence[float]) -> None:
+        """Append one row of several inputs, each with its own time (``own_times``).
+
+        Args:
+            times: Seconds since the start, one per column (the first is the row's ``t``).
+            values: One value per column.
+        """
+        if len(times) != len(self.columns):
+            raise ValueError(f"expected {len(self.columns)} times, got {len(times)}")
+        extra = "".join(f",{t:.9f}" for t in times[1:]) if self.own_times else ""
+        self._row(f"{times[0]:.9f},", values, extra)
+
+    def _row(self, head: str, values: Sequence[float], tail: str) -> None:
         if self._file is None:
             raise ValueError("the recorder is closed")
         if len(values) != len(self.columns):
             raise ValueError(f"expected {len(self.columns)} values, got {len(values)}")
         # repr-like precision: 1 ns in t, 9 significant digits for the 16-bit signal.
-        self._file.write(f"{t_s:.9f}," + ",".join(f"{v:.9g}" for v in values) + "\n")
+        self._file.write(head + ",".join(f"{v:.9g}" for v in values) + tail + "\n")
         self.rows += 1
         self.maybe_sync()
 

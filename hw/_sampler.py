@@ -28,11 +28,29 @@ class Sample(NamedTuple):
         t_s: Seconds since the sampler started (midpoint of the read, from the monotonic clock).
         code: Raw ADC output code.
         volts: The code in volts.
+        channel: Index of the input it was read from (0 for a single-input ADC).
+        round: Index of the schedule's round (period) it belongs to.
     """
 
     t_s: float
     code: int
     volts: float
+    channel: int = 0
+    round: int = 0
+
+
+class Gap(NamedTuple):
+    """A slot whose read failed (yielded by :meth:`Sampler.samples` with ``gaps=True``).
+
+    Attributes:
+        t_s: Seconds since the sampler started, when the read failed.
+        channel: Index of the input the slot was for.
+        error: What failed (``"I2CError: ..."``).
+    """
+
+    t_s: float
+    channel: int
+    error: str
 
 
 @dataclasses.dataclass
@@ -43,6 +61,7 @@ class SamplerStats:
         samples: Samples delivered.
         gaps: Slots lost to a failed read (I2C error or conversion timeout); no sample for them.
         timeouts: Of the gaps, those caused by a conversion timeout.
+        other_errors: Of the gaps, those caused by an error that is not an ``OSError``.
         overruns: Times a deadline had already passed when the sampler got to it.
         skipped_slots: Slots dropped by those overruns (the schedule jumps, never bursts).
         last_error: Message of the latest failed read, or None.
@@ -51,6 +70,7 @@ class SamplerStats:
     samples: int = 0
     gaps: int = 0
     timeouts: int = 0
+    other_errors: int = 0
     overruns: int = 0
     skipped_slots: int = 0
     last_error: str | None = None
@@ -59,16 +79,22 @@ class SamplerStats:
 class Sampler:
     """Read an ADC at a fixed rate on the schedule ``deadline_k = t0 + k / rate``.
 
+    An ADC with several inputs (``n_inputs`` and ``read_input(j)``, e.g.
+    :class:`~whiskerid.hw.InputScan`) is read round-robin: the schedule has ``n_inputs``
+    slots per period, ``t0 + k / (n_inputs rate)``, and slot ``k`` reads input
+    ``k mod n_inputs``, so each input is sampled at ``rate_hz`` and input ``j`` lags input 0
+    by ``j / (n_inputs rate_hz)``. A lost slot loses that input's sample only.
+
     Deadlines are computed from the start time and the slot index with exact rational
     arithmetic, never by accumulating sleeps, so the mean rate does not drift however long it
     runs. When a deadline has already passed (a read or the OS took too long) the overrun is
     counted and the sampler moves on to the next deadline still in the future: no burst of
-    catch-up reads. A read that fails (``OSError``: an exhausted I2C retry, a conversion
-    timeout) counts as a gap and the stream continues.
+    catch-up reads. A read that fails (an exhausted I2C retry, a conversion timeout, or any
+    other exception the bus raises) counts as a gap and the stream continues.
 
     Args:
         adc: Object with ``read() -> code`` and ``to_volts(code) -> volts``.
-        rate_hz: Sampling rate in Hz.
+        rate_hz: Sampling rate of each input in Hz.
         clock: Monotonic clock in integer nanoseconds.
         sleep: Sleep function taking seconds.
         spin_s: Busy-wait the last ``spin_s`` seconds before a deadline instead of sleeping
@@ -88,8 +114,9 @@ class Sampler:
             raise ValueError(f"rate_hz must be positive, got {rate_hz!r}")
         self.adc = adc
         self.rate_hz = float(rate_hz)
-        # Period in ns as an exact fraction: deadline_k = t0 + floor(k * num / den).
-        period = Fraction(10**9) / Fraction(rate_hz)
+        self.n_inputs = int(getattr(adc, "n_inputs", 1))
+        # Slot period in ns as an exact fraction: deadline_k = t0 + floor(k * num / den).
+        period = Fraction(10**9) / (Fraction(rate_hz) * self.n_inputs)
         self._num, self._den = period.numerator, period.denominator
         self.spin_s = float(spin_s)
         self._clock = clock
@@ -100,7 +127,7 @@ class Sampler:
 
     @property
     def period_s(self) -> float:
-        """Nominal sampling period in seconds."""
+        """Nominal time between two slots in seconds (``1 / (n_inputs rate_hz)``)."""
         return self._num / self._den * 1e-9
 
     def deadline_ns(self, k: int) -> int:
@@ -126,15 +153,20 @@ class Sampler:
         while self._clock() < deadline_ns:
             pass
 
-    def samples(self, n: int | None = None, duration_s: float | None = None) -> Iterator[Sample]:
+    def samples(
+        self, n: int | None = None, duration_s: float | None = None, *, gaps: bool = False
+    ) -> Iterator[Sample | Gap]:
         """Yield samples until ``n`` have been delivered, ``duration_s`` has passed, or stop().
 
         Args:
             n: Number of samples to deliver (gaps do not count); None for no limit.
             duration_s: Run until the schedule reaches this many seconds; None for no limit.
+            gaps: Also yield a :class:`Gap` for every failed read, so that a consumer keeps
+                running (syncing files, reporting a dead bus) while no sample arrives.
 
         Yields:
-            :class:`Sample` tuples ``(t_s, code, volts)``.
+            :class:`Sample` tuples ``(t_s, code, volts, channel)``, and :class:`Gap` tuples
+            when ``gaps`` is True.
         """
         self._stop = False
         self.t0_ns = self._clock()
@@ -155,20 +187,30 @@ class Sampler:
                 if end_ns is not None and deadline >= end_ns:
                     return
             self._wait_until(deadline)
+            sample = self._read_one(k)
             k += 1
-            sample = self._read_one()
-            if sample is not None:
-                yield sample
+            if sample is None:
+                if gaps:
+                    t_s = (self._clock() - self.t0_ns) * 1e-9
+                    yield Gap(t_s, (k - 1) % self.n_inputs, self.stats.last_error or "")
+                continue
+            yield sample
 
-    def _read_one(self) -> Sample | None:
+    def _read_one(self, k: int) -> Sample | None:
         assert self.t0_ns is not None
+        channel = k % self.n_inputs
         t_before = self._clock()
         try:
-            code = self.adc.read()
-        except OSError as e:  # I2CError and ConversionTimeout are both OSErrors
+            code = self.adc.read_input(channel) if self.n_inputs > 1 else self.adc.read()
+        except Exception as e:
+            # I2CError and ConversionTimeout are OSErrors; a bus object may raise anything
+            # else on a glitch (smbus2 wrappers, GPIO libraries): a gap either way, never the
+            # end of a service that must run for months.
             self.stats.gaps += 1
             if isinstance(e, TimeoutError):
                 self.stats.timeouts += 1
+            elif not isinstance(e, OSError):
+                self.stats.other_errors += 1
             self.stats.last_error = f"{type(e).__name__}: {e}"
             return None
         t_after = self._clock()
@@ -176,7 +218,7 @@ class Sampler:
         # The read's midpoint: for a single-shot conversion, close to the centre of the window
         # the ADS1115 averaged over.
         t_s = ((t_before + t_after) // 2 - self.t0_ns) * 1e-9
-        return Sample(t_s, code, self.adc.to_volts(code))
+        return Sample(t_s, code, self.adc.to_volts(code), channel, k // self.n_inputs)
 
     def __iter__(self) -> Iterator[Sample]:
         return self.samples()

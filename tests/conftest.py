@@ -17,7 +17,7 @@ jax.config.update("jax_enable_x64", True)
 
 _CACHE = tempfile.mkdtemp(prefix="whiskerid-test-jax-cache-")
 # Commands run as subprocesses use it too, instead of the user's cache folder.
-os.environ["WHISKERID_CACHE_DIR"] = _CACHE
+os.environ["WHISKERID_COMPILE_CACHE"] = _CACHE
 jax.config.update("jax_compilation_cache_dir", _CACHE)
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
 jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)

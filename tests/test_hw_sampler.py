@@ -188,7 +188,7 @@ def test_duration_and_stop():
     sampler = Sampler(TimedADC(clock), 200.0, clock=clock.now_ns, sleep=clock.sleep)
     samples = list(sampler.samples(duration_s=1.0))
     assert len(samples) == 200 and samples[-1].t_s == pytest.approx(0.995)
-    assert samples[0] == (0.0, 123, 0.123)
+    assert samples[0] == (0.0, 123, 0.123, 0, 0)  # t_s, code, volts, channel, round
 
     sampler = Sampler(TimedADC(clock), 200.0, clock=clock.now_ns, sleep=clock.sleep)
     got = []

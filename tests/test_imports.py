@@ -24,6 +24,7 @@ HELP_ARGVS = [
     ["train"],
     ["evaluate"],
     ["classify"],
+    ["record"],
     ["stream"],
 ]
 

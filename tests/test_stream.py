@@ -36,11 +36,15 @@ def _samples(t, x):
     return [hw.Sample(float(a), round(b), float(b)) for a, b in zip(t, x, strict=True)]
 
 
+def _noise(t, scale=0.5):
+    return scale * np.random.default_rng(0).standard_normal(np.shape(t))
+
+
 def test_windows_every_hop_with_the_right_samples():
     model = ThresholdModel()
     online = OnlineClassifier(model, hop_s=0.5)
     t = np.arange(0, 3.0, 1 / 200)
-    x = np.where(t < 1.5, 0.0, 10 * np.sin(2 * np.pi * 20 * t))
+    x = np.where(t < 1.5, 0.0, 10 * np.sin(2 * np.pi * 20 * t)) + _noise(t, 0.6)
     labels = [w for s in _samples(t, x) if (w := online.push(s.t_s, s.code)) is not None]
     # First window after 1 s, then every 0.5 s: ends near 1.0, 1.5, 2.0, 2.5 s.
     np.testing.assert_allclose([w.t_end_s for w in labels], [1.0, 1.5, 2.0, 2.5], atol=0.006)
@@ -58,7 +62,7 @@ def test_labels_fuse_the_models_context_by_time():
     online = OnlineClassifier(model, hop_s=0.5)
     t = np.arange(0, 6.0, 1 / 200)
     loud = ((t > 2.05) & (t < 2.45)) | (t > 4.0)  # a 0.4 s burst, then loud for good
-    x = np.where(loud, 10 * np.sin(2 * np.pi * 20 * t), 0.0)
+    x = np.where(loud, 10 * np.sin(2 * np.pi * 20 * t), 0.0) + _noise(t, 0.6)
     got = [w for s in _samples(t, x) if (w := online.push(s.t_s, s.code)) is not None]
     ends = np.round([w.t_end_s for w in got], 1).tolist()
     own = [e for e, w in zip(ends, got, strict=True) if w.window_label == "loud"]
@@ -84,13 +88,15 @@ def test_gaps_are_interpolated_not_shifted():
     np.testing.assert_allclose(np.diff(window), 100 / 200, atol=1e-9)
 
 
-def test_windows_with_long_gaps_are_skipped_not_guessed():
+def test_windows_with_long_gaps_are_labelled_no_data_not_guessed():
     model = ThresholdModel()
     online = OnlineClassifier(model, hop_s=0.5, min_fill=0.9)
     t = np.arange(0, 2.0, 1 / 200)
     keep = (t < 1.1) | (t > 1.3)  # 40 samples (20 %) lost: the windows ending at 1.5 s
-    got = [w for s in _samples(t[keep], 0 * t[keep]) if (w := online.push(s.t_s, s.code))]
-    np.testing.assert_allclose([w.t_end_s for w in got], [1.0], atol=0.006)
+    got = [w for s in _samples(t[keep], _noise(t[keep])) if (w := online.push(s.t_s, s.code))]
+    np.testing.assert_allclose([w.t_end_s for w in got], [1.0, 1.5], atol=0.006)
+    assert [w.label for w in got] == ["quiet", "no-data"] and got[1].confidence == 0
+    assert "159 of 200 samples" in got[1].reason and len(model.seen) == 1
     assert online.skipped_windows == 1  # 1.5 s; the next one (2.0 s) would need t = 2.0
 
 
@@ -134,13 +140,16 @@ def test_background_labels_equal_inline_labels_in_order():
             time.sleep(0.001)
             yield s
 
-    inline = run_stream(_samples(t, x), OnlineClassifier(ThresholdModel()), background=False)
-    threaded = run_stream(paced(), OnlineClassifier(ThresholdModel()), background=True)
-    assert len(inline.windows) == 10
-    assert [(w.t_end_s, w.label) for w in threaded.windows] == [
-        (w.t_end_s, w.label) for w in inline.windows
-    ]
-    assert threaded.dropped_windows == 0
+    x = x + _noise(t, 0.6)  # rounded to codes: never flat, std below 1
+    inline, threaded = [], []
+    summary = run_stream(_samples(t, x), OnlineClassifier(ThresholdModel()), background=False,
+                         on_label=inline.append)  # fmt: skip
+    again = run_stream(paced(), OnlineClassifier(ThresholdModel()), background=True,
+                       on_label=threaded.append)  # fmt: skip
+    assert len(inline) == summary.windows == again.windows == 10
+    assert [(w.t_end_s, w.label) for w in threaded] == [(w.t_end_s, w.label) for w in inline]
+    assert again.dropped_windows == 0
+    assert set(summary.label_counts) == {"quiet", "loud"}  # never a fault on a live signal
 
 
 def test_a_slow_model_never_holds_up_the_sampling_loop():
@@ -153,7 +162,7 @@ def test_a_slow_model_never_holds_up_the_sampling_loop():
     t = np.arange(0, 4.0, 1 / 200)
     submitted = []
     t0 = time.perf_counter()
-    for s in _samples(t, 0 * t):  # the model is stuck: cutting and submitting must not wait
+    for s in _samples(t, _noise(t)):  # the model is stuck: cutting and submitting must not wait
         if (p := online.cut(s.t_s, s.code)) is not None:
             submitted.append(worker.submit(p))
     assert time.perf_counter() - t0 < 5.0  # 800 samples; a blocking put would hang 10 s
@@ -174,7 +183,7 @@ def test_a_failing_model_is_reported_not_swallowed(tmp_path):
     recorder = hw.Recorder(tmp_path / "r.csv", columns=("adc",), rate_hz=200, units="code")
     t = np.arange(0, 3.0, 1 / 200)
     with pytest.raises(RuntimeError, match="classifier thread failed") as info:
-        run_stream(_samples(t, 0 * t), OnlineClassifier(Broken()), recorder=recorder)
+        run_stream(_samples(t, _noise(t)), OnlineClassifier(Broken()), recorder=recorder)
     assert isinstance(info.value.__cause__, FloatingPointError)
     assert recorder.closed  # what was recorded is kept
     assert wi.read_recording(tmp_path / "r.csv").t.size > 0
@@ -229,6 +238,8 @@ def test_stream_cli_on_the_emulated_chip(tiny_model, tmp_path, capsys):
         str(rec),
         "--json",
         "--quiet",
+        "--compile-cache",
+        "none",  # the cache is process-wide: tests must not switch it on for the others
     ]
     assert main(args) == 0
     out = json.loads(capsys.readouterr().out)
@@ -314,3 +325,71 @@ def _complete_data_rows(path):
         return 0
     lines = path.read_text().split("\n")[:-1]  # the last piece is torn or empty
     return sum(1 for line in lines if line and not line.startswith(("#", "t,")))
+
+
+def test_stream_replays_a_recording_with_odometry_and_sends_labels(tiny_model, tmp_path, capsys):
+    """A recording made with `whiskerid record` goes through the emulated chip as it would
+    online; the odometry says the robot stops at 4 s; labels go out over loopback UDP."""
+    import socket
+
+    rec = tmp_path / "brick.csv"
+    argv = ["record", str(rec), "--emulate", "brick", "--fast", "--duration", "8"]
+    assert main(argv) == 0
+    odo = tmp_path / "odo.csv"
+    odo.write_text("t,speed_mps\n0,0.2\n3.99,0.2\n4.0,0\n9,0\n")
+    listener = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    listener.bind(("127.0.0.1", 0))
+    listener.settimeout(0.5)
+    port = listener.getsockname()[1]
+    argv = ["stream", "--model", str(tiny_model), "--replay", str(rec), "--fast", "--duration",
+            "7.5", "--speed-from", str(odo), "--labels-to", f"udp:{port}", "--compile-cache",
+            "none", "--json", "--quiet"]  # fmt: skip
+    assert main(argv) == 0
+    out = json.loads(capsys.readouterr().out)
+    msgs = []
+    while True:
+        try:
+            msgs.append(json.loads(listener.recv(4096)))
+        except TimeoutError:
+            break
+    listener.close()
+    assert len(msgs) == out["windows"] == 13  # windows end at 1.5, 2.0, ..., 7.5 s
+    moving = [m for m in msgs if m["t_s"] < 4.0]
+    stopped = [m for m in msgs if m["t_s"] >= 4.0]
+    assert all(m["label"] == "stopped" and m["speed_mps"] == 0 for m in stopped)
+    assert all(m["label"] in ("brick", "sand") and m["speed_mps"] == 0.2 for m in moving)
+    assert out["label_counts"]["stopped"] == len(stopped) and out["majority_label"] == "brick"
+
+
+def test_stream_of_a_dead_sensor_labels_every_window_a_fault_and_fails(
+    tiny_model, tmp_path, capsys
+):
+    rec = tmp_path / "dead.csv"
+    t = np.arange(0, 5, 0.005)
+    wi.write_csv(rec, wi.Recording(t=t, columns={"adc": np.full(t.size, 13_000)},
+                                   meta={"units": "code"}))  # fmt: skip
+    argv = ["stream", "--model", str(tiny_model), "--replay", str(rec), "--fast", "--duration",
+            "4", "--compile-cache", "none"]  # fmt: skip
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("s  sensor-fault: flat: every sample is 13000") == 1  # once per episode
+    assert "error: no window got a terrain: sensor-fault: flat (6)" in err
+
+
+@pytest.mark.slow
+def test_a_restart_reuses_the_compile_cache(tiny_model, tmp_path):
+    """The stream's compiled functions land in --compile-cache; a second start loads them."""
+    rec = tmp_path / "r.csv"
+    assert main(["record", str(rec), "--emulate", "brick", "--fast", "--duration", "3"]) == 0
+    cache = tmp_path / "cache"
+    argv = [sys.executable, "-m", "whiskerid.cli", "stream", "--model", str(tiny_model),
+            "--replay", str(rec), "--fast", "--duration", "2",
+            "--compile-cache", str(cache)]  # fmt: skip
+    times = []
+    for _ in range(2):
+        t0 = time.perf_counter()
+        done = subprocess.run(argv, capture_output=True, text=True, timeout=300)
+        times.append(time.perf_counter() - t0)
+        assert done.returncode == 0, done.stderr
+    assert any(f.is_file() for f in cache.rglob("*"))
+    assert times[1] < times[0]

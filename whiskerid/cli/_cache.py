@@ -1,7 +1,8 @@
 """JAX's persistent compilation cache for the command line: a second run on the machine
 loads the compiled programs instead of compiling them again.
 
-The folder is ``$WHISKERID_CACHE_DIR`` if set (``off`` or empty switches the cache off),
+The folder is ``$WHISKERID_COMPILE_CACHE`` if set (``none``, ``off`` or empty switches the
+cache off),
 else ``$XDG_CACHE_HOME/whiskerid/jax`` or ``~/.cache/whiskerid/jax``. It is set through
 JAX's own environment variables before JAX is imported, so a user's ``JAX_COMPILATION_CACHE_DIR``
 wins, and ``import whiskerid`` in a user's program changes nothing.
@@ -10,10 +11,13 @@ wins, and ``import whiskerid`` in a user's program changes nothing.
 import os
 from pathlib import Path
 
+#: Environment variable naming the folder of JAX's persistent compilation cache.
+CACHE_ENV = "WHISKERID_COMPILE_CACHE"
+
 
 def cache_dir() -> Path | None:
     """The cache folder the command line uses, or None when switched off."""
-    env = os.environ.get("WHISKERID_CACHE_DIR")
+    env = os.environ.get(CACHE_ENV)
     if env is not None:
         return None if env.strip().lower() in ("", "off", "0", "none") else Path(env)
     base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"

@@ -22,6 +22,7 @@ from . import (
     _demo,
     _evaluate,
     _posterior,
+    _record,
     _simulate,
     _stream,
     _train,
@@ -80,6 +81,7 @@ def build_parser() -> argparse.ArgumentParser:
     _train.add_parser(sub)
     _evaluate.add_parser(sub)
     _classify.add_parser(sub)
+    _record.add_parser(sub)
     _stream.add_parser(sub)
     return parser
 

@@ -4,6 +4,7 @@ import math
 import sys
 from pathlib import Path
 
+from ._cache import CACHE_ENV, cache_dir
 from ._common import CommandError, HelpFormatter, check_outputs, model_folder, record_or_paper
 
 
@@ -17,8 +18,11 @@ def add_parser(sub) -> None:
             "--hop seconds the last window with a trained model, and optionally record the "
             "stream to CSV (fsync every second: a crash or power cut loses at most the last "
             "second). Either a real chip on an I2C bus (--i2c-bus, needs smbus2: pip install "
-            "'whiskerid[pi]') or a register-level emulated chip fed by the terrain simulator "
-            "(--simulate TERRAIN). Ctrl-C or SIGTERM stop cleanly and print a summary."
+            "'whiskerid[pi]'), a register-level emulated chip fed by the terrain simulator "
+            "(--simulate TERRAIN), or a recording replayed through the emulated chip "
+            "(--replay). A window the sensor or the bus cannot vouch for is labelled "
+            "sensor-fault or no-data with its reason, never a terrain; each fault episode is "
+            "logged once. Ctrl-C or SIGTERM stop cleanly and print a summary."
         ),
         formatter_class=HelpFormatter,
     )
@@ -28,7 +32,15 @@ def add_parser(sub) -> None:
     src.add_argument(
         "--simulate",
         metavar="TERRAIN",
-        help="emulate the chip, fed by the terrain simulator on this terrain",
+        help="emulate the chip, fed by the terrain simulator on this terrain (fresh terrain "
+        "for ever without --duration)",
+    )
+    src.add_argument(
+        "--replay",
+        type=Path,
+        metavar="REC",
+        help="emulate the chip, fed by this recording (volts or ADC codes) for its length "
+        "or --duration: a model checked on your own data exactly as it runs online",
     )
     p.add_argument(
         "--address",
@@ -36,7 +48,38 @@ def add_parser(sub) -> None:
         default=0x48,
         help="I2C address (ADDR pin: GND 0x48, VDD 0x49, SDA 0x4A, SCL 0x4B)",
     )
-    p.add_argument("--speed", type=float, default=0.2, help="robot speed (m/s)")
+    p.add_argument(
+        "--inputs",
+        default="A0",
+        help="inputs read round-robin (A0,A1; A0-A1 differential; 0x49:A0 on a second "
+        "chip); the first is classified, all are recorded",
+    )
+    p.add_argument(
+        "--speed",
+        type=float,
+        help="robot speed (m/s) when --speed-from is not given (default: the replayed "
+        "recording's speed_mps, else 0.2)",
+    )
+    p.add_argument(
+        "--speed-from",
+        metavar="SOURCE",
+        help='live robot speed as JSON lines ({"speed_mps": 0.3}): - for standard input, '
+        "udp:PORT on localhost, or an odometry CSV (t, speed_mps) with --replay",
+    )
+    p.add_argument(
+        "--labels-to",
+        metavar="SINK",
+        help="write each window's label as a JSON line (t_s, label, confidence, speed_mps, "
+        "reason): - for standard output, or udp:PORT on localhost",
+    )
+    p.add_argument(
+        "--stopped-below",
+        type=float,
+        default=3.0,
+        metavar="CODES",
+        help="a window varying by less than this many ADC codes RMS is a whisker at rest: "
+        "labelled stopped (0: never)",
+    )
     p.add_argument(
         "--duration",
         type=float,
@@ -53,7 +96,13 @@ def add_parser(sub) -> None:
     p.add_argument(
         "--fast",
         action="store_true",
-        help="with --simulate: run on a virtual clock, as fast as possible",
+        help="with --simulate or --replay: run on a virtual clock, as fast as possible",
+    )
+    p.add_argument(
+        "--compile-cache",
+        metavar="DIR",
+        help=f"JAX's persistent compilation cache: a restart reuses the compiled model "
+        f"(default ${CACHE_ENV}, else ~/.cache/whiskerid/jax; 'none' turns it off)",
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the simulated terrain")
     p.add_argument("--quiet", action="store_true", help="no line per window on stderr")
@@ -64,17 +113,127 @@ def add_parser(sub) -> None:
 def run(args) -> dict:
     """Stream until --duration, Ctrl-C or SIGTERM; returns the JSON summary."""
     from .. import hw
-    from ..classify import RATE_TOLERANCE, ClassifierModel
-    from ..hw import OnlineClassifier, open_recorder, run_stream, terrain_source
 
     _check_numbers(args)
     # --record never replaces a file (a taken name gets -1, -2, ...), but it must not
     # land inside what the stream reads.
     check_outputs({"--record": args.record},
-                  {"--model": model_folder(args.model), "--whisker": args.whisker},
+                  {"--model": model_folder(args.model), "--whisker": args.whisker,
+                   "--replay": args.replay},
                   force=True)  # fmt: skip
-    if args.fast and args.simulate is None:
-        raise CommandError("--fast needs --simulate (a real chip runs in real time)")
+    if args.fast and args.simulate is None and args.replay is None:
+        raise CommandError("--fast needs --simulate or --replay (a real chip runs in real time)")
+    if args.labels_to == "-" and args.json:
+        raise CommandError("--labels-to - and --json both write to standard output; use one")
+    try:
+        inputs = hw.parse_inputs(args.inputs, default_address=args.address)
+        labels_to = args.labels_to and hw.parse_endpoint(args.labels_to, "--labels-to")
+    except ValueError as e:
+        raise CommandError(str(e)) from None
+    _use_compile_cache(args.compile_cache)
+    model = _load_model(args)
+    clock = hw.FakeClock() if args.fast else None
+    timing = {} if clock is None else {"clock": clock.now_ns, "sleep": clock.sleep}
+    replayed = None
+    if args.replay is not None:
+        from ..io import read_recording
+
+        replayed = read_recording(args.replay)
+        if args.duration is None:  # the recording's length: after it there is no signal
+            args.duration = float(replayed.t[-1] - replayed.t[0])
+    speed = _speed(args, replayed)
+    bus = _bus(hw, args, inputs, replayed, timing)
+    n = len(inputs)
+    cfg = hw.DEFAULT_CONFIG.replace(mux=inputs[0].mux)
+    if n == 1:
+        adc = hw.ADS1115(bus, inputs[0].address, config=cfg, **timing)
+    else:
+        try:
+            cfg = cfg.replace(data_rate_sps=hw.data_rate_for(1.0 / (n * args.rate)))
+        except ValueError as e:
+            raise CommandError(f"--inputs {args.inputs} at --rate {args.rate:g}: {e}") from None
+        adc = hw.InputScan(bus, inputs, config=cfg, **timing)
+    sampler = hw.Sampler(adc, args.rate, **timing)
+    meta = _meta(args, inputs, speed, cfg)
+    recorder = _open_recorder(hw, args, inputs, meta, timing)
+    volts = getattr(model, "channel", None) in ("voltage", "volts")
+    lsb = cfg.fsr_v / 32768 if volts else 1.0
+    limits = (-cfg.fsr_v, cfg.fsr_v) if volts else (-32768, 32767)
+    quiet = args.stopped_below * lsb if args.stopped_below > 0 else None
+    online = hw.OnlineClassifier(model, hop_s=args.hop, speed_mps=speed, limits=limits,
+                                 quiet_std=quiet)  # fmt: skip
+    online.warm_up()  # compile (or load from the cache) before the first sample
+    sink = None if labels_to is None else hw.LabelSink(labels_to)
+    summary = hw.StreamSummary()
+
+    def show(w):
+        if sink is not None:
+            sink(w)
+        episode = summary.add(w)
+        if episode == "start":
+            print(f"t = {w.t_end_s:8.2f} s  {w.label}: {w.reason}", file=sys.stderr)
+        elif episode == "end":
+            print(f"t = {w.t_end_s:8.2f} s  the fault is over", file=sys.stderr)
+        elif not args.quiet and not w.fault:
+            alone = "" if w.window_label in ("", w.label) else f"  [window alone: {w.window_label}]"
+            print(f"t = {w.t_end_s:8.2f} s  {w.label:<12s} p = {w.confidence:.2f}  "
+                  f"({w.latency_s * 1e3:.2f} ms){alone}", file=sys.stderr)  # fmt: skip
+
+    # The summary is counted in show(): run_stream gets a throwaway one, so no double count.
+    try:
+        # A virtual clock never waits, so a worker thread would only fall behind: run inline.
+        samples = sampler.samples(duration_s=args.duration, gaps=True)
+        stats = hw.run_stream(samples, online, recorder=recorder, on_label=show,
+                              background=not args.fast)  # fmt: skip
+    finally:
+        for closing in (sink, speed if isinstance(speed, hw.SpeedFeed) else None, bus):
+            if closing is not None:
+                closing.close()
+    summary.samples, summary.duration_s = stats.samples, stats.duration_s
+    summary.skipped_windows, summary.dropped_windows = stats.skipped_windows, stats.dropped_windows
+    summary.record, summary.stopped_by = stats.record, stats.stopped_by
+    st = sampler.stats
+    summary.gaps, summary.overruns = st.gaps, st.overruns
+    summary.bus_errors = {"timeouts": st.timeouts, "other_errors": st.other_errors,
+                          "last_error": st.last_error}  # fmt: skip
+    out = summary.to_dict(truth=args.simulate)
+    faults = sum(summary.fault_counts.values())
+    print(f"stream: {out['samples']} samples, {out['windows']} windows, majority "
+          f"{out['majority_label']}, gaps {out['gaps']}, overruns {out['overruns']}, "
+          f"fault windows {faults} in {out['fault_episodes']} episode(s), "
+          f"dropped {out['dropped_windows']}"
+          + _right(out, args.simulate)
+          + (f", recorded to {out['record']}" if out["record"] else ""),
+          file=sys.stderr)  # fmt: skip
+    if summary.all_failed:
+        reasons = "; ".join(f"{k} ({v})" for k, v in out["faults"].items())
+        raise CommandError(f"no window got a terrain: {reasons}")
+    return out
+
+
+def _use_compile_cache(option: str | None) -> None:
+    """Point JAX's persistent compilation cache at the folder (before anything compiles)."""
+    if option is not None and option.lower() == "none":
+        return
+    folder = Path(option) if option else cache_dir()
+    if folder is None:  # switched off in the environment
+        return
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise CommandError(f"--compile-cache {folder}: cannot create it ({e.strerror}); give "
+                           "another folder, or 'none'") from None  # fmt: skip
+    import jax
+
+    jax.config.update("jax_compilation_cache_dir", str(folder))
+    # The stream's functions are small: cache them all, however quick they were to compile.
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+
+
+def _load_model(args):
+    from ..classify import RATE_TOLERANCE, ClassifierModel
+
     model = ClassifierModel.load(args.model)
     if args.simulate is not None and args.simulate not in model.labels:
         raise CommandError(f"--simulate {args.simulate!r} is not a terrain of this model; "
@@ -87,64 +246,96 @@ def run(args) -> dict:
             f"at: stream at {model.rate_hz:g} Hz or more, or train a model at {args.rate:g} Hz "
             "(whiskerid train --rate)"
         )
-    clock = hw.FakeClock() if args.fast else None
-    timing = {} if clock is None else {"clock": clock.now_ns, "sleep": clock.sleep}
-    if args.simulate is not None:
-        record = record_or_paper(args.whisker)
-        horizon = 600.0 if args.duration is None else args.duration + 2.0
-        source = terrain_source(record, args.simulate, args.speed, horizon, seed=args.seed)
-        chip = hw.EmulatedADS1115(source, address=args.address, seed=args.seed, **timing)
-        bus = chip
+    return model
+
+
+def _speed(args, replayed):
+    """The speed the classifier uses: a number, or a callable of the stream time."""
+    from .. import hw
+
+    if args.speed_from is None:
+        if args.speed is not None:
+            return args.speed
+        own = None if replayed is None else replayed.meta.get("speed_mps")
+        try:
+            return float(own) if own is not None else 0.2
+        except ValueError:
+            return 0.2
+    if args.speed_from in ("-",) or args.speed_from.startswith("udp:"):
+        try:
+            return hw.SpeedFeed(hw.parse_endpoint(args.speed_from, "--speed-from"))
+        except OSError as e:
+            raise CommandError(f"--speed-from {args.speed_from}: {e.strerror or e}") from None
+    if args.replay is None:
+        raise CommandError("--speed-from with an odometry file needs --replay (its times are "
+                           "the recording's)")  # fmt: skip
+    return hw.odometry_speed(args.speed_from)
+
+
+def _bus(hw, args, inputs, replayed, timing):
+    if args.i2c_bus is not None:
+        return hw.open_bus(args.i2c_bus)
+    names = [i.name for i in inputs]
+    if replayed is not None:
+        try:
+            sources = hw.replay_sources(replayed, names)
+        except ValueError as e:
+            raise CommandError(str(e)) from None
     else:
-        bus = hw.open_bus(args.i2c_bus)
-    adc = hw.ADS1115(bus, args.address, **timing)
-    sampler = hw.Sampler(adc, args.rate, **timing)
-    meta = {"source": f"simulate {args.simulate}" if args.simulate else f"i2c-{args.i2c_bus}",
-            "speed_mps": args.speed, "model": str(args.model)}  # fmt: skip
+        record = record_or_paper(args.whisker)
+        # Up front for a short run; in chunks of fresh terrain for a long or endless one.
+        up_front = args.duration is not None and args.duration <= MAX_UP_FRONT_S
+        horizon = args.duration + 2.0 if up_front else None
+        sources = [hw.terrain_source(record, args.simulate, _nominal(args), horizon,
+                                     seed=args.seed + j) for j in range(len(inputs))]  # fmt: skip
+    return hw.emulated_bus(inputs, sources, seed=args.seed, **timing)
+
+
+def _nominal(args) -> float:
+    return 0.2 if args.speed is None else args.speed
+
+
+def _meta(args, inputs, speed, cfg) -> dict:
+    source = (f"simulate {args.simulate}" if args.simulate else
+              f"replay {args.replay}" if args.replay else f"i2c-{args.i2c_bus}")  # fmt: skip
+    meta = {"source": source, "model": str(args.model), "inputs": ",".join(i.name for i in inputs),
+            "fsr_v": f"{cfg.fsr_v:g}", "data_rate_sps": cfg.data_rate_sps}  # fmt: skip
+    if isinstance(speed, float | int):
+        meta["speed_mps"] = speed
     if args.simulate:
         meta["terrain"] = args.simulate
-    recorder = open_recorder(args.record, rate_hz=args.rate, meta=meta)
-    online = OnlineClassifier(model, hop_s=args.hop, speed_mps=args.speed)
-    online.warm_up()
-
-    def show(w):
-        if not args.quiet:
-            alone = "" if w.window_label in ("", w.label) else f"  [window alone: {w.window_label}]"
-            print(f"t = {w.t_end_s:8.2f} s  {w.label:<12s} p = {w.confidence:.2f}  "
-                  f"({w.latency_s * 1e3:.2f} ms){alone}", file=sys.stderr)  # fmt: skip
-
-    # A virtual clock never waits, so a worker thread would only fall behind: run inline.
-    summary = run_stream(sampler.samples(duration_s=args.duration), online, recorder=recorder,
-                         on_label=show, background=not args.fast)  # fmt: skip
-    summary.gaps, summary.overruns = sampler.stats.gaps, sampler.stats.overruns
-    out = summary.to_dict(truth=args.simulate)
-    print(f"stream: {out['samples']} samples, {out['windows']} windows, majority "
-          f"{out['majority_label']}, gaps {out['gaps']}, overruns {out['overruns']}, "
-          f"windows skipped {out['skipped_windows']} / dropped {out['dropped_windows']}"
-          + _right(out, args.simulate)
-          + (f", recorded to {out['record']}" if out["record"] else ""),
-          file=sys.stderr)  # fmt: skip
-    return out
+    return meta
 
 
-#: Longest --simulate stream (s): its terrain is synthesised up front, in memory.
-MAX_SIMULATED_S = 3600.0
+def _open_recorder(hw, args, inputs, meta, timing):
+    if args.record is None:
+        return None
+    if len(inputs) == 1:
+        return hw.open_recorder(args.record, rate_hz=args.rate, meta=meta)
+    return hw.Recorder(hw.unique_path(args.record), columns=[i.name for i in inputs],
+                       rate_hz=args.rate, units="code", own_times=True, metadata=meta)  # fmt: skip
+
+
+#: Longest --simulate stream (s) whose terrain is synthesised up front, in memory; longer or
+#: endless ones are made in chunks while they play.
+MAX_UP_FRONT_S = 600.0
 
 
 def _check_numbers(args) -> None:
     """Refuse NaN, infinities and non-positive values (argparse's float takes 'nan', 'inf')."""
+    if not (math.isfinite(args.stopped_below) and args.stopped_below >= 0):
+        raise CommandError(f"--stopped-below {args.stopped_below!r} must be a number >= 0")
     for flag, value in (("--duration", args.duration), ("--rate", args.rate),
-                        ("--hop", args.hop), ("--speed", args.speed)):  # fmt: skip
+                        ("--hop", args.hop)):  # fmt: skip
         if value is not None and not (math.isfinite(value) and value > 0):
             hint = " (leave it out to run until Ctrl-C)" if flag == "--duration" else ""
             raise CommandError(f"{flag} {value!r} must be a positive number{hint}")
-    if args.simulate is not None and args.speed >= 5:
+    if args.speed is not None and not (math.isfinite(args.speed) and args.speed >= 0):
+        raise CommandError(f"--speed {args.speed!r} must be a number >= 0 (m/s)")
+    if args.simulate is not None and (args.speed or 0) >= 5:
         raise CommandError(f"--speed {args.speed:g} m/s is not plausible (0 < v < 5)")
-    if args.simulate is not None and (args.duration or 0) > MAX_SIMULATED_S:
-        raise CommandError(
-            f"--duration {args.duration:g} s: a simulated stream lasts at most "
-            f"{MAX_SIMULATED_S:g} s (its terrain is synthesised up front)"
-        )
+    if args.simulate is not None and args.speed == 0:
+        raise CommandError("--speed 0 with --simulate: a terrain needs a moving robot")
 
 
 def _right(out: dict, truth: str | None) -> str:

@@ -8,7 +8,10 @@ CSV layout::
     0.0021,1.6502
     ...
 
-``t`` is in seconds and need not be uniform. NPZ files hold a ``t`` array and one array per
+``t`` is in seconds and need not be uniform. A column ``t_<name>`` holds the own timestamps
+of signal ``<name>`` where they differ from ``t`` (inputs of an ADC read one after the other:
+``t,A0,A1,t_A1``); the reader keeps them in :attr:`Recording.times`, and tools that take one
+time axis use ``t``. NPZ files hold a ``t`` array and one array per
 signal column (metadata under ``meta_<key>``); NPY files hold a ``(2, N)`` or ``(N, 2)``
 array of time and one signal (the layout of the cantilever recordings).
 
@@ -59,12 +62,21 @@ class Recording:
         columns: Signal name → samples, each shape ``(n,)``.
         meta: Metadata (``rate_hz``, ``units``, ``terrain``, ``speed_mps``, ``whisker``, ...).
         source: Where it was read from, if anywhere.
+        times: Signal name → its own sample times (s), for signals not sampled at ``t``
+            (a CSV's ``t_<name>`` columns).
     """
 
     t: np.ndarray
     columns: dict[str, np.ndarray]
     meta: dict[str, str] = field(default_factory=dict)
     source: str | None = None
+    times: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def time_of(self, name: str | None = None) -> np.ndarray:
+        """The sample times of a signal (its own where it has them, else ``t``)."""
+        if name is None:
+            name = next(iter(self.columns), "")
+        return self.times.get(name, self.t)
 
     def signal(self, name: str | None = None) -> np.ndarray:
         """The named column, or the only/first one when ``name`` is None."""
@@ -88,8 +100,10 @@ def write_csv(path: str | Path, rec: Recording, *, precision: int = 10) -> Path:
         buf.write(f"# {key}: {value}\n")
     writer = csv.writer(buf, lineterminator="\n")
     names = list(rec.columns)
-    writer.writerow(["t", *names])
+    timed = [n for n in names if n in rec.times]
+    writer.writerow(["t", *names, *(f"t_{n}" for n in timed)])
     cols = [np.asarray(rec.t, dtype=float)] + [np.asarray(rec.columns[n]) for n in names]
+    cols += [np.asarray(rec.times[n], dtype=float) for n in timed]
     fmt = [_formatter(c, precision) for c in cols]
     for row in zip(*cols, strict=True):
         writer.writerow([f(v) for f, v in zip(fmt, row, strict=True)])
@@ -339,7 +353,8 @@ def _read_csv(path: Path, time_col: str, allow_empty: bool = False) -> Recording
         raise RecordingError(f"{path}: no time column {time_col!r}; header is {table.header}")
     cols = {h: table.data[:, j] for j, h in enumerate(table.header)}
     t = cols.pop(time_col)
-    return Recording(t=t, columns=cols, meta=table.meta)
+    own = {h[2:]: cols.pop(h) for h in list(cols) if h.startswith("t_") and h[2:] in cols}
+    return Recording(t=t, columns=cols, meta=table.meta, times=own)
 
 
 # What a corrupt, truncated or non-array NumPy file raises inside np.load.

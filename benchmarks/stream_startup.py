@@ -1,0 +1,89 @@
+"""Start-up benchmark: time from ``whiskerid stream`` to its first label, and its memory.
+
+Runs ``whiskerid stream --replay REC --model MODEL`` (a replayed recording through the
+emulated chip, in real time: what a restarted service does, without a robot) twice with a
+fresh JAX compilation cache folder: the first run compiles (cold), the second loads the
+compiled functions from the cache (warm). A third run with the cache off shows what the
+cache saves. For each run it prints the seconds from process start to the first label line
+on stderr and the process's peak resident memory (VmHWM), as one JSON object.
+
+    python benchmarks/stream_startup.py --model MODEL --replay REC.csv
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+
+def peak_rss_mib(pid: int) -> float | None:
+    """The process's peak resident memory (VmHWM) in MiB, or None once it has gone."""
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return float(line.split()[1]) / 1024
+    except OSError:
+        return None
+    return None
+
+
+def one_run(argv: list[str]) -> dict:
+    start = time.perf_counter()
+    proc = subprocess.Popen(argv, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
+    first: list[float] = []
+    peak = [0.0]
+
+    def watch():
+        while proc.poll() is None:
+            peak[0] = max(peak[0], peak_rss_mib(proc.pid) or 0.0)
+            time.sleep(0.05)
+
+    watcher = threading.Thread(target=watch, daemon=True)
+    watcher.start()
+    assert proc.stderr is not None
+    for line in proc.stderr:
+        if line.startswith("t = ") and not first:
+            first.append(time.perf_counter() - start)
+    proc.wait()
+    watcher.join()
+    return {
+        "first_label_s": round(first[0], 3) if first else None,
+        "total_s": round(time.perf_counter() - start, 3),
+        "peak_rss_mib": round(peak[0], 1),
+        "exit": proc.returncode,
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--model", required=True, help="trained model folder")
+    p.add_argument("--replay", required=True, help="recording to replay")
+    p.add_argument("--duration", type=float, default=3.0, help="seconds streamed per run")
+    args = p.parse_args(argv)
+    exe = Path(sys.executable).with_name("whiskerid")
+    cache = Path(tempfile.mkdtemp(prefix="whiskerid-jax-"))
+    base = [str(exe), "stream", "--model", args.model, "--replay", args.replay,
+            "--duration", str(args.duration)]  # fmt: skip
+    try:
+        out = {
+            "cold": one_run([*base, "--compile-cache", str(cache)]),
+            "warm": one_run([*base, "--compile-cache", str(cache)]),
+            "no_cache": one_run([*base, "--compile-cache", "none"]),
+            "cache_files": sum(1 for _ in cache.rglob("*") if _.is_file()),
+        }
+    finally:
+        shutil.rmtree(cache, ignore_errors=True)
+    print(json.dumps(out, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
