@@ -2,10 +2,10 @@
 loads the compiled programs instead of compiling them again.
 
 The folder is ``$WHISKERID_COMPILE_CACHE`` if set (``none``, ``off`` or empty switches the
-cache off),
-else ``$XDG_CACHE_HOME/whiskerid/jax`` or ``~/.cache/whiskerid/jax``. It is set through
-JAX's own environment variables before JAX is imported, so a user's ``JAX_COMPILATION_CACHE_DIR``
-wins, and ``import whiskerid`` in a user's program changes nothing.
+cache off), else ``$XDG_CACHE_HOME/whiskerid/jax`` or ``~/.cache/whiskerid/jax``. It is set
+through JAX's own environment variables before JAX is imported, so a user's
+``JAX_COMPILATION_CACHE_DIR`` wins, and ``import whiskerid`` in a user's program changes
+nothing.
 """
 
 import os
