@@ -35,6 +35,12 @@ def add_calibrate(sub, command_error) -> None:
         help="what fixes EI or C without a static test (auto = geometry)",
     )
     p.add_argument("--modes", type=int, default=2, help="modes in the model")
+    p.add_argument(
+        "--f1-start",
+        type=float,
+        help="centre the start search on this f1 (Hz) instead of the record's (searched within "
+        "a factor 2.5 of it)",
+    )
     p.add_argument("--zeta-per-mode", action="store_true", help="one zeta per mode")
     p.add_argument(
         "--solver",
@@ -184,6 +190,7 @@ def _cmd_calibrate(args, command_error, parser) -> dict:
         zeta_per_mode=args.zeta_per_mode,
         pin=args.pin,
         solver=args.solver,
+        f1_start_hz=args.f1_start,
     )
     _with_options(cal.record, args, parser).save(args.out)
     print(cal.report(), file=sys.stderr)

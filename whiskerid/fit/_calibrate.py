@@ -47,7 +47,7 @@ import numpy as np
 from .._choices import PINS
 from .._version import __version__
 from ..model import UniformBeam, WhiskerRecord
-from ._checks import LAG1_MAX, check_fit, hac_covariance, residual_peak
+from ._checks import LAG1_MAX, check_fit, hac_covariance, no_smaller_than, residual_peak
 from ._checks import lag1 as lag1_autocorr
 from ._lsq import scaled_inverse_gram
 from ._observation import CalibrationError, Observation, StaticTest, sha256_of
@@ -211,9 +211,10 @@ def calibrate(
     cov_white = cov
     if ok and max(r["lag1_autocorr"] for r in per_rec) > LAG1_MAX:
         cov, lag = hac_covariance(_blocks(jac, resid_w, obs), bread)
+        cov = no_smaller_than(cov, cov_white)
         uncertainty = (
-            f"HAC (Newey-West, Bartlett weights to lag {lag}): the residuals are correlated, "
-            "so the white-noise 1-sigma would be too small"
+            f"HAC (Newey-West, Bartlett weights to lag {lag}; never below the white-noise "
+            "1-sigma): the residuals are correlated"
         )
     params, corr, fixed, note = _report(record, problem, res.value, cov, static, nominal)
     if cov is not cov_white:
@@ -369,6 +370,9 @@ def _per_recording(problem: FitProblem, optimum, obs):
         c = np.asarray(rec["c"])
         nm = problem.n_modes
         amps = np.hypot(c[2 : 2 + nm], c[2 + nm : 2 + 2 * nm]) * y_std
+        cols = np.asarray(D)[:, 2 : 2 + 2 * nm] * c[2 : 2 + 2 * nm]
+        modal = cols[:, :nm] + cols[:, nm:]  # each mode's part of the fitted signal
+        modal_rms = [float(v) for v in np.sqrt(np.mean(modal**2, axis=0)) * y_std]
         info = {
             "name": o.name,
             "source": o.source,
@@ -385,6 +389,7 @@ def _per_recording(problem: FitProblem, optimum, obs):
             "offset": float(c[0] * y_std + y_mean),
             "drift_per_s": float(c[1] * y_std / max(o.t[-1] - o.t[0], 1e-12)),
             "modal_amplitudes": [float(a) for a in amps],
+            "modal_rms": modal_rms,
         }
         if spec.excitation == "sine" and spec.forced == "known":
             info["start_time_s"] = float(rec["tau"])

@@ -14,14 +14,18 @@ fit left behind and at what it found, each with a name, a threshold and a senten
   with ζ of a few percent);
 * ``far-from-nominal``: f_1 outside 0.4–2.5 times the record's (EI outside 0.16–6.25
   times): the record is probably not this whisker's;
-* ``imprecise``: f_1 known to worse than 0.5 % or ζ to worse than 10 % (1σ).
+* ``imprecise``: f_1 known to worse than 0.5 % or ζ to worse than 10 % (1σ);
+* ``mode-1-weak``: a free decay explained by a higher mode while mode 1 carries under a fifth
+  of its RMS: a pluck or tap rings mostly in mode 1, so the fit has probably taken the data's
+  main line for an aliased higher mode (f_1 off by the mode ratio).
 
 When the residuals are correlated, the covariance ``s²(JᵀJ)⁻¹`` assumes information that is
 not there (each sample counted as independent). The heteroskedasticity-and-autocorrelation
 consistent (HAC, Newey–West) sandwich ``(JᵀJ)⁻¹ (Σ_l w_l Γ_l) (JᵀJ)⁻¹``, with ``Γ_l`` the
 lag-``l`` autocovariance of the per-sample scores ``J_t r_t`` within each recording and
 Bartlett weights ``w_l = 1 − l/(L+1)`` up to the lag ``L`` where the residuals' autocorrelation
-has died out, is then reported instead, and the report says so.
+has died out, is then reported instead (each σ never below its white-noise value), and the
+report says so.
 """
 
 import numpy as np
@@ -34,6 +38,8 @@ LAG1_MAX = 0.5
 ZETA_PLAUSIBLE = 0.2
 #: f_1 outside this range of the record's nominal (ratio) means a wrong record.
 F1_RATIO = (0.4, 2.5)
+#: A decay's first mode must carry at least this share of the largest mode's RMS.
+MODE1_SHARE = 0.2
 #: Relative 1σ of f_1 and of ζ above which a fit is imprecise.
 F1_REL_STD, ZETA_REL_STD = 0.005, 0.10
 
@@ -108,6 +114,20 @@ def hac_covariance(
     return bread @ meat @ bread, max_lag
 
 
+def no_smaller_than(cov: np.ndarray, floor: np.ndarray) -> np.ndarray:
+    """``cov`` with each standard deviation raised to at least ``floor``'s, its correlations
+    kept. A truncated HAC sum can fall below the white-noise variance when the residuals'
+    correlation oscillates; correlated residuals never make a fit more certain than white
+    noise of the same size would."""
+    sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    sd_floor = np.sqrt(np.maximum(np.diag(floor), 0.0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = np.nan_to_num(cov / np.outer(sd, sd))
+    np.fill_diagonal(corr, 1.0)
+    s = np.maximum(sd, sd_floor)
+    return corr * np.outer(s, s)
+
+
 def check_fit(params: dict, per_rec: list[dict], f1_nominal_hz: float) -> dict[str, str]:
     """The failed checks of a converged fit, name → sentence (see the module docstring)."""
     out: dict[str, str] = {}
@@ -125,6 +145,17 @@ def check_fit(params: dict, per_rec: list[dict], f1_nominal_hz: float) -> dict[s
             f"a line at {f:.4g} Hz is left in the residuals of {name} ({10 * np.log10(ratio):.0f} "
             "dB above their noise floor): an unmodelled mode, drive or ringing (check the "
             "excitation, --modes and where the decay starts)"
+        )
+    weak = [r for r in per_rec if r["excitation"] == "decay" and len(r.get("modal_rms", [])) > 1
+            and r["modal_rms"][0] < MODE1_SHARE * max(r["modal_rms"])]  # fmt: skip
+    if weak:
+        r = weak[0]
+        k = int(np.argmax(r["modal_rms"]))
+        out["mode-1-weak"] = (
+            f"the fit explains {r['name']} with mode {k + 1} and leaves mode 1 almost silent: "
+            "a free decay rings mostly in mode 1, so the data's main line is probably mode 1 "
+            "and the fit took it for an aliased higher mode; give --f1-start near that line's "
+            "frequency (unaliased) or check the record"
         )
     zeta = params["zeta"]
     if not 1e-5 < zeta["value"] < 0.98 * ZETA_MAX:

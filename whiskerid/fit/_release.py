@@ -169,7 +169,10 @@ def _envelope(y, period):
     hp = y - _moving(np.mean, y, period)
     env = _moving(np.max, np.abs(hp), period)
     noise = max(1.4826 * np.median(np.abs(hp - np.median(hp))), quantum(y))
-    return env, max(8.0 * noise, 0.02 * float(np.max(env)))
+    peak = float(np.max(env))
+    # A record that rings from start to end has no quiet part to measure the noise on (the
+    # "noise" is then the ringing itself): a quarter of the peak always counts as ringing.
+    return env, min(max(8.0 * noise, 0.02 * peak), 0.25 * peak)
 
 
 # --------------------------------------------------------------------------- the decay model
@@ -259,13 +262,15 @@ def _decay_in(t, y, clipped, active, f, anchor, lo, hi):
     if tb - ta < 4 * period:
         return None
     seg = slice(ta, tb)
-    f0 = dominant_frequency(t[seg], y[seg]) or 1.0 / (period * np.median(np.diff(t)))
-    freqs, rates = _fit_tail(t[seg], y[seg], f0)
+    # seeded with the record's frequency: a stretch's own spectrum can favour a higher mode
+    freqs, rates = _fit_tail(t[seg], y[seg], f)
+    order = np.argsort(np.abs(np.log(np.abs(freqs) / f + 1e-300)))  # the record's line first
+    freqs, rates = np.abs(freqs[order]), rates[order]
     resid = _linear_fit(t[seg], y[seg], t[ta], freqs, rates)
     sigma = max(_robust_rms(resid), quantum(y))
     if np.max(np.abs(y[seg] - resid - np.median(y[seg] - resid))) < 5 * sigma:
         return None  # nothing rings above the noise
-    if not np.any(np.abs(np.log(np.abs(np.asarray(freqs)) / f + 1e-300)) < np.log(1.25)):
+    if not abs(np.log(freqs[0] / f + 1e-300)) < np.log(1.25):
         return None  # a bend or a knock, not the whisker ringing at its frequency
     start = _walk_back(t, y, clipped, period, ta, lo, freqs, rates, sigma)
     end = _walk_forward(t, y, period, start, ta, tb, hi, freqs, rates, sigma)
