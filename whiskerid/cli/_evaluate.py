@@ -2,6 +2,7 @@
 
 from pathlib import Path
 
+from ._classify import WHISKER_HELP, apply_whisker, warn_training_recordings
 from ._common import CONTEXT_HELP, CommandError, HelpFormatter, load_model, say
 
 #: Recordings labelled wrong that ``evaluate`` names on stderr (all of them are in --json).
@@ -13,9 +14,10 @@ def add_parser(sub) -> None:
     e = sub.add_parser(
         "evaluate",
         help="score a classifier on a labelled dataset",
-        description="Accuracy, per-class accuracy and confusion matrix of MODEL on DATASET, "
-        "with labels per window and for whole recordings (the recordings labelled wrong "
-        "are named).",
+        description="Accuracy, precision, recall and F1 per class (with macro and weighted "
+        "averages) and the confusion matrix of MODEL on DATASET, with labels per window and "
+        "for whole recordings (the recordings labelled wrong are named). Recordings that "
+        "trained the model are pointed out.",
         formatter_class=HelpFormatter,
     )
     e.add_argument("model", type=Path, help="model folder (whiskerid train)")
@@ -24,6 +26,7 @@ def add_parser(sub) -> None:
     e.add_argument("--plot", type=Path, help="save the confusion matrix as this PNG")
     e.add_argument("--context", type=float, metavar="S",
                    help=CONTEXT_HELP + "; the model's by default")  # fmt: skip
+    e.add_argument("--whisker", type=Path, metavar="TOML", help=WHISKER_HELP)
     e.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     e.set_defaults(func=run)
 
@@ -31,7 +34,7 @@ def add_parser(sub) -> None:
 def run(args) -> dict:
     """Score the model and print its confusion matrix; returns the JSON summary."""
     from ..classify import evaluate_classifier as evaluate
-    from ..classify import format_confusion, load_dataset
+    from ..classify import format_confusion, format_report, load_dataset
     from ..io import check_out_path
     from ..plot import plot_confusion
 
@@ -42,8 +45,12 @@ def run(args) -> dict:
                       rate_hz=model.rate_hz, labels=model.labels)  # fmt: skip
     if model.needs_speed and not ws.has_speed:
         raise CommandError(f"{args.model} needs speed_mps on every recording of {args.dataset}")
+    apply_whisker(model, args.whisker, ws.metas or [], args.model)
+    seen = warn_training_recordings(model, ws.sources)
     res = evaluate(model, ws)
+    res["training_recordings_evaluated"] = len(seen)
     say(format_confusion(res["confusion"], res["labels"]))
+    say(format_report(res["report"]))
     say(f"accuracy {res['accuracy']:.4f} on {res['n_windows']} windows, labels resting on "
         f"{model.context_s:g} s (each window on its own: "
         f"{res['accuracy_per_window']:.4f}; whole recordings: "
