@@ -453,3 +453,62 @@ def test_one_compilation_per_architecture(tmp_path):
                 model.predict_proba(ws.windows[:n])
             model.predict_window(ws.windows[0])
     assert compiled["_batch_proba"] <= 1 and compiled["_window_proba"] <= 1, compiled
+
+
+def test_cli_two_sensors_whisker_aware_model_on_another_calibrated_whisker(tmp_path, capsys):
+    """The paper's two orthogonal sensors through synth, train (whisker-aware), evaluate
+    and classify; a recording of another whisker is refused until its calibrated record is
+    given, then classified; re-evaluating the training recordings is pointed out and the
+    report has precision, recall and F1."""
+    ds, other, model = tmp_path / "ds", tmp_path / "other", tmp_path / "model"
+    paper = tmp_path / "paper.toml"
+    wi.paper_record().save(paper)
+    damp = tmp_path / "damp.toml"
+    wi.paper_record().replace(name="damp", zeta=0.08).save(damp)
+    args = ["--terrains", "brick", "sand", "--speeds", "0.2", "--duration", "3", "--channels", "2"]
+    assert main(["dataset", "synth", "--out", str(ds), "--runs", "2", *args]) == 0
+    assert main(["dataset", "synth", "--out", str(other), "--runs", "1", "--seed", "3",
+                 "--whisker", str(damp), *args]) == 0  # fmt: skip
+    train = ["train", str(ds), "--out", str(model), "--hidden", "8", "--max-epochs", "20",
+             "--channel", "hall_a,hall_b", "--whisker", str(paper), "--json"]  # fmt: skip
+    assert main(train) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["channel"] == "hall_a,hall_b" and out["whisker"] == "paper-whisker"
+    head = json.loads((model / "model.json").read_text())
+    assert head["features"]["deconvolve"] and head["features"]["cross_channel"]
+    assert head["features"]["channels"] == 2 and "zeta = 0.04" in head["whisker"]["toml"]
+    assert len(head["training"]["recordings_sha256"]) == 4
+    assert main(["evaluate", str(model), str(ds), "--json"]) == 0
+    captured = capsys.readouterr()
+    res = json.loads(captured.out)
+    assert "4 of these 4 recording(s) trained this model" in captured.err
+    assert "f1-score" in captured.err and res["training_recordings_evaluated"] == 4
+    assert set(res["report"]["per_class"]["sand"]) == {"precision", "recall", "f1", "support"}
+    rec = next((other / "sand").glob("*.csv"))
+    assert main(["classify", str(model), str(rec)]) == 2
+    err = capsys.readouterr().err
+    assert "made with whisker 'damp'" in err and "pass --whisker" in err
+    assert main(["classify", str(model), str(rec), "--whisker", str(damp), "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["channel"] == "hall_a,hall_b" and res["label"] in ("brick", "sand")
+    assert main(["evaluate", str(model), str(other), "--whisker", str(damp)]) == 0
+    assert "trained this model" not in capsys.readouterr().err
+
+
+def test_model_files_without_the_new_settings_still_load(tmp_path):
+    """A model file written before whisker-aware and cross-channel features, and before
+    training hashes, loads and labels as before; it cannot take another whisker."""
+    ws = _toy_windows()
+    model = wi.train_classifier(ws, features="paper", config=FAST)
+    path = model.save(tmp_path / "m")
+    head = json.loads((path / "model.json").read_text())
+    for key in ("deconvolve", "cross_channel"):
+        del head["features"][key]
+    head["training"].pop("recordings_sha256", None)
+    (path / "model.json").write_text(json.dumps(head))
+    old = wi.ClassifierModel.load(path)
+    np.testing.assert_array_equal(old.predict_proba(ws.windows[:5]),
+                                  model.predict_proba(ws.windows[:5]))  # fmt: skip
+    assert old.whisker is None and not old.needs_whisker
+    with pytest.raises(ValueError, match="raw signal's"):
+        old.use_whisker(wi.WhiskerResponse(wi.paper_record(), 20.0))

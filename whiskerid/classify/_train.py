@@ -52,10 +52,29 @@ def default_spec(
 def features_of(ws: WindowSet, spec: FeatureSpec, whisker: WhiskerResponse | None = None
                 ) -> np.ndarray:  # fmt: skip
     """Features of every window, shape ``(n, spec.n_features)`` (``whisker``: the one that
-    recorded them, for whisker-aware features)."""
+    recorded them, for whisker-aware features).
+
+    Raises:
+        ValueError: Some windows give features that are not finite or beyond float32 (a
+            cell such as 1e308 in a recording): the recordings are named, since a network
+            trained on them could not be used.
+    """
     speeds = ws.speeds if (spec.kind == "fitted" and spec.use_speed) else None
     numbers = spec.numbers(whisker) if spec.deconvolve else None
-    return np.asarray(compute_features(spec, ws.windows, speeds, numbers))
+    feats = np.asarray(compute_features(spec, ws.windows, speeds, numbers))
+    bad = ~np.all(np.isfinite(feats) & (np.abs(feats) < _FEATURE_LIMIT), axis=1)
+    if bad.any():
+        names = [ws.sources[r] for r in np.unique(ws.recording[bad])]
+        raise ValueError(
+            f"{len(names)} recording(s) give features that are not finite numbers (e.g. "
+            f"{names[0]}, window at {ws.starts()[np.flatnonzero(bad)[0]]:g} s): a sample there "
+            "is absurdly large (such as 1e308); mend or remove the recording(s)"
+        )
+    return feats
+
+
+#: Features beyond this cannot be standardised in float32, the networks' precision.
+_FEATURE_LIMIT = 1e30
 
 
 def fit_on_features(
