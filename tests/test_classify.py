@@ -1,6 +1,7 @@
 """MLP, model files, evaluation and the classification CLI on a tiny dataset."""
 
 import collections
+import itertools
 import json
 import logging
 import re
@@ -512,3 +513,53 @@ def test_model_files_without_the_new_settings_still_load(tmp_path):
     assert old.whisker is None and not old.needs_whisker
     with pytest.raises(ValueError, match="raw signal's"):
         old.use_whisker(wi.WhiskerResponse(wi.paper_record(), 20.0))
+
+
+def _tone_dataset(root, tone):
+    """``ROOT/<label>/r<k>.csv``: 8 s at 200 Hz, a tone ``tone(label, speed)`` with two
+    weaker side tones 5 Hz away, in noise, at speeds 0.1 and 0.3 m/s (two runs each)."""
+    rng = np.random.default_rng(0)
+    t = np.arange(1600) / 200.0
+    for label in ("a", "b"):
+        for k, (v, _run) in enumerate(itertools.product((0.1, 0.3), range(2))):
+            f = tone(label, v)
+            x = (
+                np.sin(2 * np.pi * f * t)
+                + 0.3 * np.sin(2 * np.pi * (f - 5) * t)
+                + 0.2 * np.sin(2 * np.pi * (f + 5) * t)
+                + 0.1 * rng.standard_normal(t.size)
+            )
+            rec = wi.Recording(t=t, columns={"adc": x}, meta={"speed_mps": str(v)})
+            wi.write_csv(root / label / f"r{k}.csv", rec)
+
+
+@pytest.mark.parametrize(
+    ("tone", "holds"),
+    [(lambda label, v: (20.0 if label == "a" else 40.0) + 50 * v, True),  # by terrain and speed
+     (lambda label, v: 30.0, False)],  # one frequency for all: not distinct
+)  # fmt: skip
+def test_cli_analyze_dominant_components_and_the_papers_claim(tmp_path, capsys, tone, holds):
+    root = tmp_path / "ds"
+    _tone_dataset(root, tone)
+    out, png = tmp_path / "a.json", tmp_path / "a.png"
+    assert main(["analyze", str(root), "--out", str(out), "--plot", str(png), "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    g = res["groups"]["b"]["0.3"]
+    assert abs(g["dominant_hz"] - tone("b", 0.3)) < 0.1 and g["sandwiched"]
+    assert g["recordings"] == 2 and len(g["components"]) == 3
+    assert res["claim"]["verdict"].startswith("the claim holds" if holds else "the claim does not")
+    assert res["claim"]["sandwiched"] == 1.0
+    assert json.loads(out.read_text())["groups"] == res["groups"] and png.stat().st_size > 5000
+
+
+def test_spectrum_plot_labels_peaks_not_noise_bumps():
+    from whiskerid.plot import real_peaks
+
+    rng = np.random.default_rng(0)
+    f = np.fft.rfftfreq(2000, 1 / 200)
+    noise = np.abs(np.fft.rfft(rng.standard_normal(2000)))
+    assert real_peaks(f, noise) == []  # the largest noise bumps stand about 2x over the median
+    tone = noise.copy()
+    tone[np.searchsorted(f, 37.0)] += 40 * np.median(noise)
+    peaks = real_peaks(f, tone)
+    assert len(peaks) == 1 and abs(peaks[0].frequency_hz - 37.0) < 0.2

@@ -11,6 +11,7 @@ cross-validation, the paper's protocol) and ``_borealtc`` (a public IMU dataset)
 """
 
 from .. import _jax_setup as _jax_setup
+from ._analysis import analyze_dataset as analyze_dataset
 from ._borealtc import load_borealtc as load_borealtc
 from ._context import fuse_context as fuse_context
 from ._dataset import RATE_TOLERANCE as RATE_TOLERANCE

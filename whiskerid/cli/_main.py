@@ -14,6 +14,7 @@ import time
 import zipfile
 
 from . import (
+    _analyze,
     _calibrate,
     _classify,
     _dataset,
@@ -77,6 +78,7 @@ def build_parser() -> argparse.ArgumentParser:
     _train.add_parser(sub)
     _evaluate.add_parser(sub)
     _classify.add_parser(sub)
+    _analyze.add_parser(sub)
     _stream.add_parser(sub)
     return parser
 
