@@ -216,6 +216,7 @@ def cross_validate(
     use_speed: bool | None = None,
     progress: bool = False,
     whisker=None,
+    window_fit: bool = False,
 ) -> dict:
     """Cross-validation by recording: every recording is tested once, by a model that
     never saw it (:func:`recording_folds`).
@@ -236,6 +237,7 @@ def cross_validate(
         progress: Show a progress bar over the folds (on stderr).
         whisker: The calibrated whisker (:class:`WhiskerResponse`) that recorded ``ws``,
             for whisker-aware features (see :func:`train_classifier`).
+        window_fit: Per-window damped-oscillation fits among the features.
 
     Returns:
         :func:`scores` of the fused labels pooled over all windows, plus
@@ -249,7 +251,8 @@ def cross_validate(
     if whisker is not None:
         channels = ws.windows.shape[1] if ws.windows.ndim == 3 else 1
         whisker = WhiskerResponse(whisker.record, whisker.amplifier, channels)
-    spec = default_spec(ws, features, use_speed=use_speed, whisker=whisker is not None)
+    spec = default_spec(ws, features, use_speed=use_speed, whisker=whisker is not None,
+                        window_fit=window_fit)  # fmt: skip
     window_s = spec.window / spec.rate_hz
     context_s = default_context_s(features, window_s) if context_s is None else context_s
     check_context(context_s, window_s)

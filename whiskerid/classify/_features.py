@@ -53,7 +53,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._choices import FEATURE_KINDS
-from ..fit import least_squares, to_interval
+from ..fit import fit_windows, least_squares, to_interval
 
 FeatureKind = Literal["fitted", "paper"]
 _EPS = 1e-12
@@ -86,6 +86,10 @@ class FeatureSpec:
         cross_channel: Add features of the two channels together (fitted, two channels):
             coherence in four bands, orientation (``cos 2θ``, ``sin 2θ``) and axis ratio of
             the motion ellipse, and the log power ratio of the channels.
+        window_fit: Add, per channel, a damped oscillation fitted to the window in the
+            time domain (:func:`whiskerid.fit.fit_windows`, all windows at once): its damped
+            frequency (over Nyquist), ζ, log amplitude over the window's RMS and the fit's
+            ``ok`` flag (fitted). Computed on the host, next to the compiled features.
     """
 
     kind: FeatureKind = "fitted"
@@ -102,6 +106,7 @@ class FeatureSpec:
     channels: int = 1
     deconvolve: bool = False
     cross_channel: bool = False
+    window_fit: bool = False
 
     def __post_init__(self):
         if self.kind not in FEATURE_KINDS:
@@ -128,7 +133,9 @@ class FeatureSpec:
         n = self.channels * self._per_channel()
         if self.kind == "fitted" and self.deconvolve:
             n += self.channels * (len(self.octave_edges()) - 1)
-        return n + (N_CROSS if self.kind == "fitted" and self.cross_channel else 0)
+        n += N_CROSS if self.kind == "fitted" and self.cross_channel else 0
+        return n + (self.channels * N_WINDOW_FIT if self.kind == "fitted" and self.window_fit
+                    else 0)  # fmt: skip
 
     @property
     def window_shape(self) -> tuple[int, ...]:
@@ -218,6 +225,8 @@ class Numbers(NamedTuple):
     to_base: Array  # the same shape: codes to base acceleration (m/s²)
 
 
+#: Window-fit features per channel: damped frequency, ζ, log amplitude, ok.
+N_WINDOW_FIT = 4
 #: Cross-channel features: coherence in four bands, ellipse (cos 2θ, sin 2θ, axis ratio),
 #: log power ratio.
 N_CROSS = 8
@@ -606,4 +615,30 @@ def compute_features(spec: FeatureSpec, windows, speeds=None, numbers: Numbers |
         speeds = jnp.full(windows.shape[0], jnp.nan)
     speeds = jnp.broadcast_to(jnp.asarray(speeds, dtype=float), (windows.shape[0],))
     numbers = spec.numbers() if numbers is None else numbers
-    return _batch_features(spec.structure(), numbers, windows, speeds)
+    feats = _batch_features(spec.structure(), numbers, windows, speeds)
+    if not (spec.kind == "fitted" and spec.window_fit):
+        return feats
+    return jnp.concatenate([feats, jnp.asarray(window_fit_features(spec, windows))], axis=1)
+
+
+def window_fit_features(spec: FeatureSpec, windows) -> np.ndarray:
+    """The ``window_fit`` part of the features, shape ``(n, channels × 4)`` (zeros for
+    a spec without it): per channel, a damped oscillation fitted to each window by
+    :func:`whiskerid.fit.fit_windows`. A window whose fit fails gives zeros and ``ok = 0``.
+    """
+    windows = np.asarray(windows, dtype=float)
+    n = windows.shape[0]
+    if not (spec.kind == "fitted" and spec.window_fit) or n == 0:
+        return np.zeros((n, 0 if not spec.window_fit else spec.channels * N_WINDOW_FIT))
+    flat = windows.reshape(-1, spec.window)
+    fits = fit_windows(flat, rate_hz=spec.rate_hz)
+    ok = np.asarray(fits.ok)
+    rms = np.maximum(flat.std(axis=1), _EPS)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        parts = np.stack([np.asarray(fits.damped_frequency_hz) * 2 / spec.rate_hz,
+                          np.asarray(fits.zeta),
+                          np.log(np.asarray(fits.amplitude) / rms + _EPS),
+                          ok.astype(float)], axis=1)  # fmt: skip
+    parts = np.where(ok[:, None] & np.isfinite(parts), parts, 0.0)
+    parts[:, 3] = ok
+    return parts.reshape(n, -1)

@@ -41,7 +41,7 @@ from ._dataset import (
     signal_column,
     windows_of,
 )
-from ._features import FeatureSpec, batch_features, window_features
+from ._features import FeatureSpec, batch_features, window_features, window_fit_features
 from ._mlp import (
     MLP,
     from_arrays,
@@ -68,17 +68,18 @@ def _mean_proba(nets, z):
 
 
 @functools.partial(jax.jit, static_argnums=0)
-def _batch_proba(structure, numbers, nets, mean, std, windows, speeds):
+def _batch_proba(structure, numbers, nets, mean, std, windows, speeds, extra):
     """Class probabilities of a batch of windows: compiled once per feature structure,
-    network sizes and (padded) batch shape, for every model of that architecture."""
-    feats = batch_features(structure, numbers, windows, speeds)
+    network sizes and (padded) batch shape, for every model of that architecture.
+    ``extra``: features computed on the host (window fits), ``(n, 0)`` when none."""
+    feats = jnp.concatenate([batch_features(structure, numbers, windows, speeds), extra], axis=1)
     return _mean_proba(nets, (feats.astype(jnp.float32) - mean) / std)
 
 
 @functools.partial(jax.jit, static_argnums=0)
-def _window_proba(structure, numbers, nets, mean, std, window, speed):
+def _window_proba(structure, numbers, nets, mean, std, window, speed, extra):
     """Class probabilities of one window (see :func:`_batch_proba`)."""
-    feats = window_features(structure, window, speed, numbers)
+    feats = jnp.concatenate([window_features(structure, window, speed, numbers), extra])
     return _mean_proba(nets, (feats.astype(jnp.float32) - mean) / std)
 
 
@@ -205,7 +206,8 @@ class ClassifierModel:
         # Padded (repeating the last window) to a size class: one compilation serves
         # recordings and datasets of many lengths.
         rows = np.minimum(np.arange(pad_rows(n)), n - 1)
-        p = _batch_proba(self._structure, *self._args, windows[rows], speeds[rows])
+        extra = window_fit_features(self.spec, windows[rows])
+        p = _batch_proba(self._structure, *self._args, windows[rows], speeds[rows], extra)
         return _finite(np.asarray(p)[:n])
 
     def predict_windows(self, windows, speeds=None) -> tuple[np.ndarray, np.ndarray]:
@@ -238,7 +240,8 @@ class ClassifierModel:
         if self.needs_speed:
             check_speed(speed)
         v = np.float64(np.nan if speed is None else speed)
-        return _finite(np.asarray(_window_proba(self._structure, *self._args, x, v)))
+        extra = window_fit_features(self.spec, x[None])[0]
+        return _finite(np.asarray(_window_proba(self._structure, *self._args, x, v, extra)))
 
     def classify_recording(self, rec: Recording, *, speed: float | None = None) -> dict:
         """Labels of every window of a recording, and one for the whole (mean probability).

@@ -16,7 +16,7 @@ from ._whisker import WhiskerResponse
 
 def default_spec(
     ws: WindowSet, features: str = "fitted", *, use_speed: bool | None = None,
-    whisker: bool = False,
+    whisker: bool = False, window_fit: bool = False,
 ) -> FeatureSpec:  # fmt: skip
     """Feature settings for a window set: its rate and window; speed features and absolute
     octave levels when the speed is known; whisker-aware features with ``whisker`` (a
@@ -39,7 +39,7 @@ def default_spec(
     # with them; the synthetic set, where the speed is known: 1 point better).
     spec = FeatureSpec(kind="fitted", rate_hz=ws.rate_hz, window=window, octave_bands=use,
                        use_speed=use, channels=channels, deconvolve=whisker,
-                       cross_channel=channels == 2)  # fmt: skip
+                       cross_channel=channels == 2, window_fit=window_fit)  # fmt: skip
     if use:
         df, nyq = ws.rate_hz / window, ws.rate_hz / 2
         lo, hi = 2 * df / float(ws.speeds.min()), nyq / float(ws.speeds.max())
@@ -147,6 +147,7 @@ def train_classifier(
     hop: int | None = None,
     context_s: float | None = None,
     whisker: WhiskerResponse | None = None,
+    window_fit: bool = False,
 ) -> ClassifierModel:
     """Train a classifier on labelled windows.
 
@@ -164,6 +165,8 @@ def train_classifier(
         whisker: The calibrated whisker that recorded ``ws``: the features then divide out
             its transfer function, and the model keeps it, so that it can run on another
             calibrated whisker (:meth:`ClassifierModel.use_whisker`).
+        window_fit: Add per-window damped-oscillation fits (``fitted``; see
+            :class:`FeatureSpec`).
     """
     if config is None:
         config = default_config(features)
@@ -171,7 +174,8 @@ def train_classifier(
     if whisker is not None:
         channels = ws.windows.shape[1] if ws.windows.ndim == 3 else 1
         whisker = WhiskerResponse(whisker.record, whisker.amplifier, channels)
-    spec = default_spec(ws, features, use_speed=use_speed, whisker=whisker is not None)
+    spec = default_spec(ws, features, use_speed=use_speed, whisker=whisker is not None,
+                        window_fit=window_fit)  # fmt: skip
     if context_s is None:
         context_s = default_context_s(features, spec.window / spec.rate_hz)
     model = fit_on_features(features_of(ws, spec, whisker), ws, spec, config,

@@ -45,6 +45,12 @@ def add_parser(sub) -> None:
         "levels in dB, the windows recoloured to it), and the model keeps it, so that "
         "classify/evaluate --whisker can run it on another calibrated whisker",
     )  # fmt: skip
+    t.add_argument(
+        "--modal-fit", action="store_true",
+        help="with --features fitted: add a damped oscillation fitted to each window in the "
+        "time domain (all windows at once): its frequency, zeta, amplitude and whether the "
+        "fit converged, per channel",
+    )  # fmt: skip
     t.add_argument("--window", type=float, default=1.0, help="window length (s)")
     t.add_argument("--hop", type=float, help="window step (s); the window length by default")
     t.add_argument(
@@ -95,6 +101,8 @@ def run(args) -> dict:
 
     if args.window <= 0:
         raise CommandError("--window must be positive")
+    if args.modal_fit and args.features != "fitted":
+        raise CommandError("--modal-fit goes with --features fitted")
     if args.cv is not None and args.cv < 2:
         raise CommandError(f"--cv must be at least 2 folds, not {args.cv}")
     # Settings first: bad ones are refused before the data is read.
@@ -108,7 +116,8 @@ def run(args) -> dict:
     if args.cv is not None:
         cv = cross_validate(ws, features=args.features, folds=args.cv, seed=args.seed,
                             config=config, context_s=args.context, use_speed=use_speed,
-                            progress=sys.stderr.isatty(), whisker=whisker)  # fmt: skip
+                            progress=sys.stderr.isatty(), whisker=whisker,
+                            window_fit=args.modal_fit)  # fmt: skip
         cv = {k: cv[k] for k in ("folds", "accuracy", "accuracy_per_window", "per_class",
                                  "accuracy_by_fold", "context_s", "accuracy_per_recording",
                                  "n_recordings")}  # fmt: skip
@@ -117,7 +126,8 @@ def run(args) -> dict:
             f"{cv['accuracy_per_recording']:.3f} of {cv['n_recordings']})")  # fmt: skip
     model = train_classifier(ws, features=args.features, config=config,
                              use_speed=use_speed, channel=None, hop=hop,
-                             context_s=args.context, whisker=whisker)  # fmt: skip
+                             context_s=args.context, whisker=whisker,
+                             window_fit=args.modal_fit)  # fmt: skip
     if cv is not None:
         model.info["cross_validation"] = cv
     model.save(args.out)
