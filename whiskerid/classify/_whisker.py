@@ -29,6 +29,7 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -47,10 +48,15 @@ def deflection_per_acc(whisker, freqs_hz) -> np.ndarray:
     """Complex relative deflection at the sensor per unit base acceleration (m per m/s²).
 
     From the exact model's harmonic steady state (static correction included): the response
-    to ``y_b = sin(ω t)/ω²`` read at ``t = 0`` and a quarter period later.
+    to ``y_b = sin(ω t)/ω²`` read at ``t = 0`` and a quarter period later. Compiled once
+    per number of frequencies; the whisker is traced.
     """
     f = jnp.maximum(jnp.asarray(freqs_hz, dtype=float), 1e-3)
+    return np.asarray(_deflection_per_acc(whisker, f))
 
+
+@eqx.filter_jit
+def _deflection_per_acc(whisker, f):
     def one(fb):
         w = 2 * jnp.pi * fb
         t = jnp.stack([0.0, 0.25 / fb])
@@ -58,7 +64,7 @@ def deflection_per_acc(whisker, freqs_hz) -> np.ndarray:
         # base acceleration −sin(ωt): phasor −1; deflection phasor d(T/4) + i d(0)
         return -(d[1] + 1j * d[0])
 
-    return np.asarray(jax.vmap(one)(f))
+    return jax.vmap(one)(f)
 
 
 def averaging_response(freqs_hz, conversion_s: float, points: int) -> np.ndarray:
@@ -98,19 +104,15 @@ class WhiskerResponse:
         halls = planes.halls(self.record, self.amplifier)[: self.channels]
         adc = self.record.adc
         f = np.asarray(freqs_hz, dtype=float)
+        # every alias of every bin in one call: row m is f + m·rate (m = −A … A), row A
+        # the bins' own frequencies
+        fm = np.abs(f[None, :] + np.arange(-ALIASES, ALIASES + 1)[:, None] * rate_hz)
+        avg = averaging_response(fm.ravel(), adc.conversion_time_s, adc.averaging_points)
         per_plane = []
         for w in whiskers:
-            own = deflection_per_acc(w, f) * averaging_response(
-                f, adc.conversion_time_s, adc.averaging_points
-            )
-            power = np.zeros(f.size)
-            for m in range(-ALIASES, ALIASES + 1):
-                fm = np.abs(f + m * rate_hz)
-                h = deflection_per_acc(w, fm) * averaging_response(
-                    fm, adc.conversion_time_s, adc.averaging_points
-                )
-                power += np.abs(h) ** 2
-            per_plane.append(np.sqrt(power) * np.exp(1j * np.angle(own)))
+            h = (deflection_per_acc(w, fm.ravel()) * avg).reshape(fm.shape)
+            power = np.sum(np.abs(h) ** 2, axis=0)
+            per_plane.append(np.sqrt(power) * np.exp(1j * np.angle(h[ALIASES])))
         gains = np.array([float(h.gain_v_per_m) for h in halls]) / adc.lsb_v
         mix = planes.mixing()[: self.channels, : self.channels]
         return (gains[:, None] * mix)[None] * np.stack(per_plane, axis=1)[:, None, :]
