@@ -240,7 +240,7 @@ class ClassifierModel:
         if self.needs_speed:
             check_speed(speed)
         v = np.float64(np.nan if speed is None else speed)
-        extra = window_fit_features(self.spec, x[None])[0]
+        extra = window_fit_features(self.spec, x[None])[0] if self.spec.window_fit else _NONE
         return _finite(np.asarray(_window_proba(self._structure, *self._args, x, v, extra)))
 
     def classify_recording(self, rec: Recording, *, speed: float | None = None) -> dict:
@@ -449,6 +449,10 @@ def _check_weights(path: Path, arrays: dict) -> None:
                 f"{path}: weights {name} reach {np.max(np.abs(a)):.3g} (a trained network's "
                 f"stay below {MAX_WEIGHT:g}): the file is corrupt; retrain with 'whiskerid train'"
             )
+
+
+#: No host-computed features: one device-resident empty row, reused by every call.
+_NONE = jnp.zeros((0,))
 
 
 def _finite(p: np.ndarray) -> np.ndarray:
