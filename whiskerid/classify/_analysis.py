@@ -55,6 +55,7 @@ def analyze_dataset(
     segment_s: float = 4.0,
     rate_hz: float | None = None,
     n_components: int = 3,
+    time_col: str = "t",
 ) -> dict:
     """Dominant frequency components per terrain and speed, and the paper's claim checked.
 
@@ -66,6 +67,7 @@ def analyze_dataset(
             reciprocal.
         rate_hz: Rate to resample to; the first recording's by default.
         n_components: Spectral peaks reported per group (the dominant one first).
+        time_col: Name of the recordings' time column.
 
     Returns:
         A JSON-able dict: ``groups`` (per terrain, per speed: ``components`` as
@@ -83,7 +85,7 @@ def analyze_dataset(
     rate = rate_hz
     for label, paths in files.items():
         for path in paths:
-            rec = read_recording(path)
+            rec = read_recording(path, time_col=time_col)
             rate = recording_rate(rec) if rate is None else rate
             speed = recording_speed(rec)
             key = (label, round(speed, 4) if np.isfinite(speed) else None)

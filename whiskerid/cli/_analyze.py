@@ -25,6 +25,7 @@ def add_parser(sub) -> None:
     a.add_argument("dataset", type=Path,
                    help="dataset folder: one subfolder of recordings per label")  # fmt: skip
     a.add_argument("--channel", help="column to analyse (the first signal column by default)")
+    a.add_argument("--time-col", default="t", help="name of the recordings' time column")
     a.add_argument("--segment", type=float, default=4.0, metavar="S",
                    help="Welch segment length (s): the frequency resolution is 1/S")  # fmt: skip
     a.add_argument("--rate", type=float,
@@ -50,7 +51,8 @@ def run(args) -> dict:
     if not args.segment > 0 or args.components < 1:
         raise CommandError("--segment must be positive and --components at least 1")
     res = analyze_dataset(args.dataset, channel=args.channel, segment_s=args.segment,
-                          rate_hz=args.rate, n_components=args.components)  # fmt: skip
+                          rate_hz=args.rate, n_components=args.components,
+                          time_col=args.time_col)  # fmt: skip
     for label, speeds in res["groups"].items():
         for speed, g in speeds.items():
             comps = ", ".join(f"{f:.2f}" for f, _ in g["components"])

@@ -176,7 +176,11 @@ def plot_dominant_frequencies(path: str | Path, analysis: dict) -> Path:
                            edgecolors="C1", zorder=2, label=name)  # fmt: skip
         ax.set_ylim(0, analysis["rate_hz"] / 2)
         ax.set_title(label, fontsize=10)
-        ax.set_xlabel("speed (m/s)")
+        if "None" in groups[label]:  # recordings without speed_mps: one column, no axis
+            ax.set_xticks([])
+            ax.set_xlabel("speed not recorded")
+        else:
+            ax.set_xlabel("speed (m/s)")
         ax.grid(alpha=0.3)
     for ax in axes[:, 0]:
         ax.set_ylabel("frequency (Hz)")
