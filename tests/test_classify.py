@@ -565,9 +565,10 @@ def test_spectrum_plot_labels_peaks_not_noise_bumps():
     assert len(peaks) == 1 and abs(peaks[0].frequency_hz - 37.0) < 0.2
 
 
-def test_modal_fit_model_round_trip_and_cli_option(tmp_path, capsys):
+@pytest.mark.slow
+def test_modal_fit_model_round_trip(tmp_path):
     """``window_fit`` features go through training, the model file and both predict
-    paths; ``train --modal-fit`` is refused with the paper's features."""
+    paths."""
     ws = _toy_windows(n_rec=4, per=6)
     model = wi.train_classifier(ws, config=replace(FAST, max_epochs=20), window_fit=True,
                                 use_speed=False)  # fmt: skip
@@ -575,6 +576,9 @@ def test_modal_fit_model_round_trip_and_cli_option(tmp_path, capsys):
     loaded = wi.ClassifierModel.load(model.save(tmp_path / "m"))
     p = loaded.predict_proba(ws.windows[:3])
     np.testing.assert_allclose(loaded.window_proba(ws.windows[0]), p[0], rtol=1e-5, atol=1e-6)
+
+
+def test_modal_fit_option_goes_with_the_fitted_features(tmp_path, capsys):
     assert main(["train", str(tmp_path), "--out", str(tmp_path / "x"), "--features", "paper",
                  "--modal-fit"]) == 2  # fmt: skip
     assert "--modal-fit goes with --features fitted" in capsys.readouterr().err
