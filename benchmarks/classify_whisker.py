@@ -9,6 +9,7 @@ ones (``train --whisker``), on one Hall sensor (``hall_a``) and on two (``hall_a
 Prints one JSON object.
 
     .venv/bin/python benchmarks/classify_whisker.py [--runs 3] [--duration 10] [--truth]
+        [--train-seed 0] [--test-seed 1]
 """
 
 import argparse
@@ -132,6 +133,8 @@ def main() -> None:
     ap.add_argument("--test-runs", type=int, default=2, help="test runs per terrain and speed")
     ap.add_argument("--duration", type=float, default=10.0, help="recording length (s)")
     ap.add_argument("--truth", action="store_true", help="true records, not calibrated ones")
+    ap.add_argument("--train-seed", type=int, default=0, help="dataset seed of the training set")
+    ap.add_argument("--test-seed", type=int, default=1, help="dataset seed of the test sets")
     args = ap.parse_args()
     out: dict = {"terrains": len(TERRAINS), "speeds_mps": SPEEDS, "train_runs": args.runs,
                  "test_runs": args.test_runs, "duration_s": args.duration,
@@ -141,14 +144,16 @@ def main() -> None:
         tmp = Path(tmp)
         paper = paper_record()
         train_ws = {}
-        root = dataset(tmp / "train", paper, args.runs, args.duration, seed=0)
+        root = dataset(tmp / "train", paper, args.runs, args.duration, seed=args.train_seed)
         for ch in ("hall_a", "hall_a,hall_b"):
             train_ws[ch] = load_dataset(root, channel=ch)
         tests, cal = {}, {}
         for name in VARIANTS:
             rec = paper if name == "same" else variant(name)
             cal[name] = rec if (name == "same" or args.truth) else calibrated(rec, tmp)
-            root = dataset(tmp / f"test-{len(tests)}", rec, args.test_runs, args.duration, seed=1)
+            root = dataset(
+                tmp / f"test-{len(tests)}", rec, args.test_runs, args.duration, seed=args.test_seed
+            )
             tests[name] = {ch: load_dataset(root, channel=ch) for ch in train_ws}
         out["calibrated_f1_hz"] = {n: round(float(r.whisker().natural_frequencies_hz[0]), 3)
                                    for n, r in cal.items()}  # fmt: skip
@@ -178,7 +183,7 @@ def main() -> None:
                 print(key, row, file=sys.stderr)
         out["accuracy_percent_per_window_and_three_windows"] = acc
         out["base_motion_band_error"] = {
-            name: band_error(tests[name]["hall_a"], cal[name], 1, args.duration)
+            name: band_error(tests[name]["hall_a"], cal[name], args.test_seed, args.duration)
             for name in ("same", "f1 x0.7", "zeta 0.08")
         }
     out["total_s"] = round(time.perf_counter() - t_start, 1)
