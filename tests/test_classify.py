@@ -1,6 +1,7 @@
 """MLP, model files, evaluation and the classification CLI on a tiny dataset."""
 
 import collections
+import itertools
 import json
 import logging
 import re
@@ -453,3 +454,131 @@ def test_one_compilation_per_architecture(tmp_path):
                 model.predict_proba(ws.windows[:n])
             model.predict_window(ws.windows[0])
     assert compiled["_batch_proba"] <= 1 and compiled["_window_proba"] <= 1, compiled
+
+
+def test_cli_two_sensors_whisker_aware_model_on_another_calibrated_whisker(tmp_path, capsys):
+    """The paper's two orthogonal sensors through synth, train (whisker-aware), evaluate
+    and classify; a recording of another whisker is refused until its calibrated record is
+    given, then classified; re-evaluating the training recordings is pointed out and the
+    report has precision, recall and F1."""
+    ds, other, model = tmp_path / "ds", tmp_path / "other", tmp_path / "model"
+    paper = tmp_path / "paper.toml"
+    wi.paper_record().save(paper)
+    damp = tmp_path / "damp.toml"
+    wi.paper_record().replace(name="damp", zeta=0.08).save(damp)
+    args = ["--terrains", "brick", "sand", "--speeds", "0.2", "--duration", "3", "--channels", "2"]
+    assert main(["dataset", "synth", "--out", str(ds), "--runs", "2", *args]) == 0
+    assert main(["dataset", "synth", "--out", str(other), "--runs", "1", "--seed", "3",
+                 "--whisker", str(damp), *args]) == 0  # fmt: skip
+    train = ["train", str(ds), "--out", str(model), "--hidden", "8", "--max-epochs", "20",
+             "--channel", "hall_a,hall_b", "--whisker", str(paper), "--json"]  # fmt: skip
+    assert main(train) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["channel"] == "hall_a,hall_b" and out["whisker"] == "paper-whisker"
+    head = json.loads((model / "model.json").read_text())
+    assert head["features"]["deconvolve"] and head["features"]["cross_channel"]
+    assert head["features"]["channels"] == 2 and "zeta = 0.04" in head["whisker"]["toml"]
+    assert len(head["training"]["recordings_sha256"]) == 4
+    assert main(["evaluate", str(model), str(ds), "--json"]) == 0
+    captured = capsys.readouterr()
+    res = json.loads(captured.out)
+    assert "4 of these 4 recording(s) trained this model" in captured.err
+    assert "f1-score" in captured.err and res["training_recordings_evaluated"] == 4
+    assert set(res["report"]["per_class"]["sand"]) == {"precision", "recall", "f1", "support"}
+    rec = next((other / "sand").glob("*.csv"))
+    assert main(["classify", str(model), str(rec)]) == 2
+    err = capsys.readouterr().err
+    assert "made with whisker 'damp'" in err and "pass --whisker" in err
+    assert main(["classify", str(model), str(rec), "--whisker", str(damp), "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["channel"] == "hall_a,hall_b" and res["label"] in ("brick", "sand")
+    assert main(["evaluate", str(model), str(other), "--whisker", str(damp)]) == 0
+    assert "trained this model" not in capsys.readouterr().err
+
+
+def test_model_files_without_the_new_settings_still_load(tmp_path):
+    """A model file written before whisker-aware and cross-channel features, and before
+    training hashes, loads and labels as before; it cannot take another whisker."""
+    ws = _toy_windows()
+    model = wi.train_classifier(ws, features="paper", config=FAST)
+    path = model.save(tmp_path / "m")
+    head = json.loads((path / "model.json").read_text())
+    for key in ("deconvolve", "cross_channel"):
+        del head["features"][key]
+    head["training"].pop("recordings_sha256", None)
+    (path / "model.json").write_text(json.dumps(head))
+    old = wi.ClassifierModel.load(path)
+    np.testing.assert_array_equal(old.predict_proba(ws.windows[:5]),
+                                  model.predict_proba(ws.windows[:5]))  # fmt: skip
+    assert old.whisker is None and not old.needs_whisker
+    with pytest.raises(ValueError, match="raw signal's"):
+        old.use_whisker(wi.WhiskerResponse(wi.paper_record(), 20.0))
+
+
+def _tone_dataset(root, tone):
+    """``ROOT/<label>/r<k>.csv``: 8 s at 200 Hz, a tone ``tone(label, speed)`` with two
+    weaker side tones 5 Hz away, in noise, at speeds 0.1 and 0.3 m/s (two runs each)."""
+    rng = np.random.default_rng(0)
+    t = np.arange(1600) / 200.0
+    for label in ("a", "b"):
+        for k, (v, _run) in enumerate(itertools.product((0.1, 0.3), range(2))):
+            f = tone(label, v)
+            x = (
+                np.sin(2 * np.pi * f * t)
+                + 0.3 * np.sin(2 * np.pi * (f - 5) * t)
+                + 0.2 * np.sin(2 * np.pi * (f + 5) * t)
+                + 0.1 * rng.standard_normal(t.size)
+            )
+            rec = wi.Recording(t=t, columns={"adc": x}, meta={"speed_mps": str(v)})
+            wi.write_csv(root / label / f"r{k}.csv", rec)
+
+
+@pytest.mark.parametrize(
+    ("tone", "holds"),
+    [(lambda label, v: (20.0 if label == "a" else 40.0) + 50 * v, True),  # by terrain and speed
+     (lambda label, v: 30.0, False)],  # one frequency for all: not distinct
+)  # fmt: skip
+def test_cli_analyze_dominant_components_and_the_papers_claim(tmp_path, capsys, tone, holds):
+    root = tmp_path / "ds"
+    _tone_dataset(root, tone)
+    out, png = tmp_path / "a.json", tmp_path / "a.png"
+    assert main(["analyze", str(root), "--out", str(out), "--plot", str(png), "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    g = res["groups"]["b"]["0.3"]
+    assert abs(g["dominant_hz"] - tone("b", 0.3)) < 0.1 and g["sandwiched"]
+    assert g["recordings"] == 2 and len(g["components"]) == 3
+    assert res["claim"]["verdict"].startswith("the claim holds" if holds else "the claim does not")
+    assert res["claim"]["sandwiched"] == 1.0
+    assert json.loads(out.read_text())["groups"] == res["groups"] and png.stat().st_size > 5000
+
+
+def test_spectrum_plot_labels_peaks_not_noise_bumps():
+    from whiskerid.plot import real_peaks
+
+    rng = np.random.default_rng(0)
+    f = np.fft.rfftfreq(2000, 1 / 200)
+    noise = np.abs(np.fft.rfft(rng.standard_normal(2000)))
+    assert real_peaks(f, noise) == []  # the largest noise bumps stand about 2x over the median
+    tone = noise.copy()
+    tone[np.searchsorted(f, 37.0)] += 40 * np.median(noise)
+    peaks = real_peaks(f, tone)
+    assert len(peaks) == 1 and abs(peaks[0].frequency_hz - 37.0) < 0.2
+
+
+@pytest.mark.slow
+def test_modal_fit_model_round_trip(tmp_path):
+    """``window_fit`` features go through training, the model file and both predict
+    paths."""
+    ws = _toy_windows(n_rec=4, per=6)
+    model = wi.train_classifier(ws, config=replace(FAST, max_epochs=20), window_fit=True,
+                                use_speed=False)  # fmt: skip
+    assert model.spec.window_fit
+    loaded = wi.ClassifierModel.load(model.save(tmp_path / "m"))
+    p = loaded.predict_proba(ws.windows[:3])
+    np.testing.assert_allclose(loaded.window_proba(ws.windows[0]), p[0], rtol=1e-5, atol=1e-6)
+
+
+def test_modal_fit_option_goes_with_the_fitted_features(tmp_path, capsys):
+    assert main(["train", str(tmp_path), "--out", str(tmp_path / "x"), "--features", "paper",
+                 "--modal-fit"]) == 2  # fmt: skip
+    assert "--modal-fit goes with --features fitted" in capsys.readouterr().err

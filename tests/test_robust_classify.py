@@ -144,3 +144,39 @@ def test_speeds_must_be_positive_numbers():
 def test_classes_without_windows_score_none_not_zero():
     res = scores(confusion_matrix([0, 0, 1], [0, 1, 1], 3), ["a", "b", "c"])
     assert res["per_class"] == {"a": 0.5, "b": 1.0, "c": None}
+
+
+def test_huge_or_non_finite_weights_are_refused_naming_the_file(tmp_path):
+    """Weights scaled by 3e37 are finite but overflow every logit (confidence NaN): the
+    model file is refused on loading, naming the weights file."""
+    ws = _toy_windows(tmp_path)
+    model = wi.train_classifier(ws, features="paper",
+                                config=TrainConfig(hidden=(8,), max_epochs=10))  # fmt: skip
+    path = model.save(tmp_path / "m")
+    with np.load(path / "weights.npz") as z:
+        arrays = {k: z[k] for k in z.files}
+    for scale, match in ((3e37, "weights m0_W0 reach 3"), (np.inf, "non-finite")):
+        np.savez(path / "weights.npz", **{k: a * scale for k, a in arrays.items()})
+        with pytest.raises(wi.ModelError, match=f"weights.npz: .*{match}"):
+            wi.ClassifierModel.load(path)
+
+
+def test_a_1e308_cell_refuses_training_naming_the_recording(tmp_path, capsys):
+    from whiskerid.cli import main
+
+    root = _dataset(tmp_path / "d", {"x": [{}, {}], "y": [{"f": 50.0}, {"f": 50.0}]})
+    bad = root / "y" / "r1.csv"
+    lines = bad.read_text().splitlines()
+    t = lines[-100].split(",")[0]
+    lines[-100] = f"{t},1e308"
+    bad.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "model"
+    assert main(["train", str(root), "--out", str(out), "--features", "paper",
+                 "--max-epochs", "5"]) == 2  # fmt: skip
+    err = capsys.readouterr().err
+    assert "r1.csv" in err and "1e308" in err and not out.exists()
+
+
+def _toy_windows(tmp_path):
+    root = _dataset(tmp_path / "toy", {"x": [{}, {}], "y": [{"f": 50.0}, {"f": 50.0}]})
+    return load_dataset(root)

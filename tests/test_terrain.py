@@ -87,3 +87,55 @@ def test_speed_moves_the_texture_frequency():
         band = (f > 0.5) & (f < 8)
         peaks.append(f[band][np.argmax(disp[band])])
     assert 0.8 < peaks[0] < 1.8 and 2.6 < peaks[1] < 5.0, peaks
+
+
+def _planes_record(**planes):
+    rec = wi.paper_record()
+    return rec.replace(extra={**rec.extra, "planes": planes})
+
+
+def test_two_sensors_keep_the_vertical_run_and_add_the_lateral_plane():
+    """Sensor A of a two-sensor run is the one-sensor run (no cross-talk by default); sensor
+    B reads the lateral plane, which is partly coherent with the vertical one. Gain,
+    offset and cross-talk of a record's [planes] table act on sensor B as stated."""
+    spec = [RunSpec("soft-soil", 0.2, 0)]
+    one = wi.synthesize_runs(spec, duration_s=2.0)[0]
+    two = wi.synthesize_runs(spec, duration_s=2.0, channels=2)[0]
+    assert list(two.columns) == ["hall_a", "hall_b"] and two.meta["planes"]
+    np.testing.assert_array_equal(two.columns["hall_a"], one.columns["adc"])
+    np.testing.assert_array_equal(two.t, one.t)
+    a, b = (two.columns[c].astype(float) for c in ("hall_a", "hall_b"))
+    assert b.std() > 3 and abs(np.corrcoef(a, b)[0, 1]) < 0.9
+    rec = _planes_record(gain_ratio_b=2.0, offset_b_v=1.0, cross_talk=0.0)
+    other = wi.synthesize_runs(spec, duration_s=2.0, channels=2, record=rec)[0]
+    b2 = other.columns["hall_b"].astype(float)
+    assert abs(b2.std() / b.std() - 2) < 0.1
+    lsb = rec.adc.lsb_v
+    assert abs((b2.mean() - b.mean()) * lsb - (1.0 - 1.65)) < 0.02
+    talk = wi.synthesize_runs(spec, duration_s=2.0, channels=2,
+                              record=_planes_record(cross_talk=0.3))[0]  # fmt: skip
+    a3 = talk.columns["hall_a"].astype(float)
+    assert np.corrcoef(a3, talk.columns["hall_b"])[0, 1] > np.corrcoef(a, b)[0, 1] + 0.2
+
+
+@pytest.mark.parametrize(
+    ("planes", "match"),
+    [({"lateral_frequncy_ratio": 1.1}, "unknown key"), ({"cross_talk": 0.9}, "cross_talk"),
+     ({"lateral_zeta": 1.5}, "lateral_zeta"), ({"gain_ratio_b": 0.0}, "gain_ratio_b")],
+)  # fmt: skip
+def test_planes_table_is_checked(planes, match):
+    with pytest.raises(ValueError, match=match):
+        wi.synthesize_runs([BRICK], duration_s=2.0, channels=2, record=_planes_record(**planes))
+
+
+def test_lateral_plane_has_its_own_frequency():
+    """A lateral frequency ratio moves the lateral whisker's modes by that ratio (κ by its
+    square) and leaves the vertical whisker as the record's."""
+    from whiskerid.terrain import SensorPlanes
+
+    rec = _planes_record(lateral_frequency_ratio=1.2, lateral_zeta=0.07)
+    vert, lat = SensorPlanes.from_record(rec).whiskers(rec)
+    np.testing.assert_allclose(lat.natural_frequencies_hz, 1.2 * vert.natural_frequencies_hz)
+    np.testing.assert_allclose(vert.natural_frequencies_hz,
+                               rec.whisker().natural_frequencies_hz)  # fmt: skip
+    assert float(lat.zeta[0]) == 0.07 and float(vert.zeta[0]) == 0.04

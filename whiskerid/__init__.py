@@ -43,6 +43,9 @@ _LAZY = {
     "ModelError": "classify",
     "WindowSet": "classify",
     "band_energies": "classify",
+    "base_band_levels": "classify",
+    "WhiskerResponse": "classify",
+    "SensorPlanes": "terrain",
     "compute_features": "classify",
     "cross_validate": "classify",
     "evaluate_classifier": "classify",
@@ -118,8 +121,10 @@ if TYPE_CHECKING:  # static tools see every name
     from .classify import ClassifierModel as ClassifierModel
     from .classify import FeatureSpec as FeatureSpec
     from .classify import ModelError as ModelError
+    from .classify import WhiskerResponse as WhiskerResponse
     from .classify import WindowSet as WindowSet
     from .classify import band_energies as band_energies
+    from .classify import base_band_levels as base_band_levels
     from .classify import compute_features as compute_features
     from .classify import cross_validate as cross_validate
     from .classify import evaluate_classifier as evaluate_classifier
@@ -185,6 +190,7 @@ if TYPE_CHECKING:  # static tools see every name
     from .terrain import SPEEDS_MPS as SPEEDS_MPS
     from .terrain import TERRAIN_FAMILIES as TERRAIN_FAMILIES
     from .terrain import TERRAINS as TERRAINS
+    from .terrain import SensorPlanes as SensorPlanes
     from .terrain import synthesize_dataset as synthesize_dataset
     from .terrain import synthesize_runs as synthesize_runs
     from .terrain import wheel_filter as wheel_filter

@@ -5,34 +5,41 @@ The modules, along the data path: ``_dataset`` (recordings → labelled windows 
 ``_features`` (a feature vector per window), ``_mlp`` (the network and its training loop),
 ``_split`` (splits and folds by recording), ``_train`` (a :class:`ClassifierModel` from
 windows), ``_model_file`` (the model, its compiled predict functions and its files),
-``_context`` (labels fused over consecutive windows), ``_evaluate`` (scores,
+``_whisker`` (the whisker's own transfer function, divided out of whisker-aware
+features), ``_context`` (labels fused over consecutive windows), ``_evaluate`` (scores,
 cross-validation, the paper's protocol) and ``_borealtc`` (a public IMU dataset).
 """
 
 from .. import _jax_setup as _jax_setup
+from ._analysis import analyze_dataset as analyze_dataset
 from ._borealtc import load_borealtc as load_borealtc
 from ._context import fuse_context as fuse_context
 from ._dataset import RATE_TOLERANCE as RATE_TOLERANCE
 from ._dataset import WindowSet as WindowSet
 from ._dataset import load_dataset as load_dataset
+from ._dataset import recorded_amplifier as recorded_amplifier
 from ._dataset import recording_rate as recording_rate
 from ._dataset import timestamp_rate as timestamp_rate
+from ._evaluate import classification_report as classification_report
 from ._evaluate import confusion_matrix as confusion_matrix
 from ._evaluate import cross_validate as cross_validate
 from ._evaluate import evaluate_classifier as evaluate_classifier
 from ._evaluate import evaluate_features as evaluate_features
 from ._evaluate import format_confusion as format_confusion
+from ._evaluate import format_report as format_report
 from ._evaluate import paper_protocol as paper_protocol
 from ._evaluate import recording_scores as recording_scores
 from ._evaluate import scores as scores
 from ._features import FeatureSpec as FeatureSpec
 from ._features import band_energies as band_energies
+from ._features import base_band_levels as base_band_levels
 from ._features import compute_features as compute_features
 from ._features import spectral_peaks as spectral_peaks
 from ._mlp import TrainConfig as TrainConfig
 from ._mlp import default_config as default_config
 from ._model_file import ClassifierModel as ClassifierModel
 from ._model_file import ModelError as ModelError
+from ._model_file import trained_on as trained_on
 from ._split import grouped_split as grouped_split
 from ._split import recording_folds as recording_folds
 from ._split import split_by_recording as split_by_recording
@@ -40,3 +47,5 @@ from ._train import default_spec as default_spec
 from ._train import features_of as features_of
 from ._train import fit_on_features as fit_on_features
 from ._train import train_classifier as train_classifier
+from ._whisker import WhiskerResponse as WhiskerResponse
+from ._whisker import deflection_per_acc as deflection_per_acc

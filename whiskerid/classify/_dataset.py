@@ -48,7 +48,9 @@ class WindowSet:
         start_s: Start of each window within its recording (s), shape ``(n,)``; None
             when unknown (windows are then taken as consecutive and non-overlapping, in
             recording order, for :func:`fuse_context`).
-        channel: The recorded column the windows come from, where known.
+        metas: Each recording's metadata (indexed like ``sources``), where known.
+        channel: The recorded column the windows come from, where known; several
+            columns joined by commas (``"hall_a,hall_b"``) for multi-channel windows.
     """
 
     windows: np.ndarray
@@ -60,6 +62,7 @@ class WindowSet:
     rate_hz: float
     start_s: np.ndarray | None = None
     channel: str | None = None
+    metas: list[dict] | None = None
 
     def __len__(self) -> int:
         return int(self.labels.size)
@@ -215,6 +218,41 @@ def signal_column(rec: Recording, channel: str | None, *, only_column_ok: bool =
     return channel
 
 
+def channel_names(channel) -> tuple[str, ...] | None:
+    """Several columns from ``"a,b"``, ``["a", "b"]`` or ``"all"`` (kept as ``("all",)``);
+    None for the default (the first signal column)."""
+    if channel is None:
+        return None
+    names = channel.split(",") if isinstance(channel, str) else list(channel)
+    names = tuple(n.strip() for n in names if n.strip())
+    if not names:
+        raise ValueError(f"no column named in {channel!r}")
+    if len(set(names)) != len(names):
+        raise ValueError(f"column(s) named twice in {channel!r}")
+    return names
+
+
+def recording_signals(rec: Recording, names: tuple[str, ...]) -> np.ndarray:
+    """Several channels of a recording, shape ``(channels, samples)``, each checked as by
+    :func:`recording_signal` (a missing column is refused, naming the ones there are)."""
+    missing = [n for n in names if n not in rec.columns]
+    if missing:
+        raise RecordingError(
+            f"{rec.source or 'recording'}: no column(s) {missing} (columns: "
+            f"{list(rec.columns)}): record every channel the model reads"
+        )
+    return np.stack([recording_signal(rec, n) for n in names])
+
+
+def multi_windows(t, xs, *, rate_hz: float, window: int, hop: int):
+    """:func:`windows_of` for ``(channels, samples)``: windows ``(k, channels, window)``
+    (``(k, window)`` for one channel) and their start times."""
+    per = [windows_of(t, x, rate_hz=rate_hz, window=window, hop=hop) for x in xs]
+    if len(per) == 1:
+        return per[0]
+    return np.stack([w for w, _ in per], axis=1), per[0][1]
+
+
 def _visible(p: Path) -> bool:
     """Not a hidden or system entry (``.ipynb_checkpoints``, macOS ``._x.csv`` and
     ``__MACOSX``): those are never recordings or labels."""
@@ -281,7 +319,9 @@ def load_dataset(
 
     Args:
         root: ``ROOT/<label>/<recording>.csv``.
-        channel: Column to classify (the first signal column by default).
+        channel: Column to classify (the first signal column by default); several, as
+            ``"hall_a,hall_b"`` or a list, give windows ``(n, channels, window)``, and
+            ``"all"`` takes every signal column (the same in every recording).
         window_s: Window length (s).
         hop_s: Step between windows (s); ``window_s`` (no overlap) by default.
         rate_hz: Rate to resample to (no recording may be slower); by default the
@@ -306,12 +346,22 @@ def load_dataset(
     if not (np.isfinite(rate) and rate > 0):
         raise ValueError(f"rate {rate_hz!r} Hz must be a positive number")
     window, hop = window_samples(window_s, hop_s, rate)
-    channel = _first_channel(recs, root) if channel is None else channel
+    cols = _dataset_channels(recs, root, channel)
+    if cols is not None and len(cols) == 1:
+        channel, cols = cols[0], None
+    elif cols is None:
+        channel = _first_channel(recs, root) if channel is None else channel
+    else:
+        channel = ",".join(cols)
     chunks, ys, groups, speeds, sources, starts = [], [], [], [], [], []
     for i, ((lab, rec), own) in enumerate(zip(recs, rates, strict=True)):
         _not_slower(rec, own, rate)
-        x = recording_signal(rec, channel, only_column_ok=labels is not None)
-        w, st = windows_of(rec.t, x, rate_hz=rate, window=window, hop=hop)
+        if cols is None:
+            x = recording_signal(rec, channel, only_column_ok=labels is not None)
+            w, st = windows_of(rec.t, x, rate_hz=rate, window=window, hop=hop)
+        else:
+            xs = recording_signals(rec, cols)
+            w, st = multi_windows(rec.t, xs, rate_hz=rate, window=window, hop=hop)
         chunks.append(w)
         ys.append(np.full(len(w), names.index(lab)))
         groups.append(np.full(len(w), i))
@@ -328,6 +378,7 @@ def load_dataset(
         rate,
         np.concatenate(starts),
         channel,
+        [dict(rec.meta) for _, rec in recs],
     )
     if len(ws) == 0:
         raise RecordingError(f"{root}: recordings are shorter than one window ({window_s} s)")
@@ -338,6 +389,27 @@ def load_dataset(
             f"({window_s:g} s); record longer, pass a shorter window, or move them away"
         )
     return ws
+
+
+def _dataset_channels(recs, root, channel) -> tuple[str, ...] | None:
+    """The columns ``channel`` names (``"all"``: every signal column of the first
+    recording, which all recordings must have); None for one plain column name."""
+    if channel is None or (isinstance(channel, str) and "," not in channel and channel != "all"):
+        return None
+    if channel == "all":
+        first = tuple(recs[0][1].columns)
+        for _, rec in recs:
+            if tuple(rec.columns) != first:
+                raise RecordingError(
+                    f"{root}: --channel all needs the same columns in every recording; "
+                    f"{Path(str(recs[0][1].source)).name} has {list(first)}, "
+                    f"{Path(str(rec.source)).name} has {list(rec.columns)}: name the columns"
+                )
+        return first
+    try:
+        return channel_names(channel)
+    except ValueError as err:
+        raise RecordingError(f"{root}: {err}") from None
 
 
 def _dataset_rate(rates: list[float], recs: list[tuple[str, Recording]], root) -> float:
@@ -353,6 +425,37 @@ def _dataset_rate(rates: list[float], recs: list[tuple[str, Recording]], root) -
             "to resample them all to one rate"
         )
     return float(rates[0])
+
+
+def recorded_whiskers(ws: WindowSet) -> dict[str, str]:
+    """``whisker`` metadata of each recording that has it: ``source → whisker name``."""
+    return {src: str(m["whisker"]) for src, m in zip(ws.sources, ws.metas or [], strict=False)
+            if "whisker" in m}  # fmt: skip
+
+
+def recorded_amplifier(metas: list[dict], default: float = 1.0) -> float:
+    """The recordings' common ``amplifier`` metadata (the sensor amplifier's gain on top of
+    the whisker record's Hall gain); ``default`` when none says.
+
+    Raises:
+        RecordingError: The recordings disagree, or a value is not a positive number.
+    """
+    values = set()
+    for m in metas:
+        if "amplifier" in m:
+            try:
+                a = float(m["amplifier"])
+            except ValueError:
+                a = float("nan")
+            if not (np.isfinite(a) and a > 0):
+                raise RecordingError(f"amplifier {m['amplifier']!r} is not a positive number")
+            values.add(a)
+    if len(values) > 1:
+        raise RecordingError(
+            f"the recordings were made through amplifiers of different gains {sorted(values)}: "
+            "one model takes one sensor chain"
+        )
+    return values.pop() if values else default
 
 
 def check_speed(speed) -> None:

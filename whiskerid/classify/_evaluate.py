@@ -19,6 +19,7 @@ from ._mlp import (
 from ._model_file import ClassifierModel
 from ._split import recording_folds
 from ._train import check_classes, default_spec, features_of, fit_on_features
+from ._whisker import WhiskerResponse
 
 
 def confusion_matrix(y_true, y_pred, n_classes: int) -> np.ndarray:
@@ -28,12 +29,59 @@ def confusion_matrix(y_true, y_pred, n_classes: int) -> np.ndarray:
     return c
 
 
+def classification_report(conf: np.ndarray, labels) -> dict:
+    """Precision, recall, F1 and support per class, with their macro (plain mean over the
+    classes that have windows) and weighted (by support) averages, as scikit-learn's
+    ``classification_report`` defines them (a class never predicted has precision 0).
+    """
+    conf = np.asarray(conf)
+    tp, rows, cols = conf.diagonal(), conf.sum(axis=1), conf.sum(axis=0)
+    precision = np.where(cols > 0, tp / np.maximum(cols, 1), 0.0)
+    recall = np.where(rows > 0, tp / np.maximum(rows, 1), 0.0)
+    f1 = np.where(precision + recall > 0,
+                  2 * precision * recall / np.maximum(precision + recall, 1e-300), 0.0)  # fmt: skip
+    rounded = zip(labels, precision, recall, f1, rows, strict=True)
+    per = {lab: {"precision": round(float(p), 4), "recall": round(float(r), 4),
+                 "f1": round(float(f), 4), "support": int(n)}
+           for lab, p, r, f, n in rounded}  # fmt: skip
+    seen = rows > 0
+    total = max(int(rows.sum()), 1)
+
+    def avg(weights):
+        return {
+            name: round(float(np.sum(v * weights) / max(np.sum(weights), 1e-300)), 4)
+            for name, v in (("precision", precision), ("recall", recall), ("f1", f1))
+        }
+
+    return {"per_class": per,
+            "macro_avg": {**avg(seen.astype(float)), "support": int(rows.sum())},
+            "weighted_avg": {**avg(rows / total), "support": int(rows.sum())}}  # fmt: skip
+
+
+def format_report(report: dict) -> str:
+    """:func:`classification_report` as a text table (scikit-learn's layout)."""
+    names = list(report["per_class"])
+    width = max(12, *(len(n) for n in names))
+    head = " " * width + "  precision    recall  f1-score   support"
+    rows = [head, ""]
+    lines = [*report["per_class"].items(), ("", None), ("macro avg", report["macro_avg"]),
+             ("weighted avg", report["weighted_avg"])]  # fmt: skip
+    for name, r in lines:
+        if r is None:
+            rows.append("")
+            continue
+        rows.append(f"{name:>{width}}  {r['precision']:9.3f} {r['recall']:9.3f} "
+                    f"{r['f1']:9.3f} {r['support']:9d}")  # fmt: skip
+    return "\n".join(rows)
+
+
 def scores(conf: np.ndarray, labels) -> dict:
-    """Accuracy, per-class accuracy (recall; None for a class without windows) and the
-    confusion matrix as a JSON-able dict."""
+    """Accuracy, per-class accuracy (recall; None for a class without windows), the
+    confusion matrix and :func:`classification_report` (``report``) as a JSON-able dict."""
     total, rows = conf.sum(), conf.sum(axis=1)
     per = conf.diagonal() / np.maximum(rows, 1)
     return {
+        "report": classification_report(conf, labels),
         "accuracy": float(conf.trace() / max(total, 1)),
         "per_class": {
             lab: round(float(a), 4) if n else None  # None: no windows of it
@@ -167,6 +215,8 @@ def cross_validate(
     context_s: float | None = None,
     use_speed: bool | None = None,
     progress: bool = False,
+    whisker=None,
+    window_fit: bool = False,
 ) -> dict:
     """Cross-validation by recording: every recording is tested once, by a model that
     never saw it (:func:`recording_folds`).
@@ -185,6 +235,9 @@ def cross_validate(
         context_s: Signal each label rests on (s); :func:`default_context_s` by default.
         use_speed: Speed-normalised features; by default when every recording has a speed.
         progress: Show a progress bar over the folds (on stderr).
+        whisker: The calibrated whisker (:class:`WhiskerResponse`) that recorded ``ws``,
+            for whisker-aware features (see :func:`train_classifier`).
+        window_fit: Per-window damped-oscillation fits among the features.
 
     Returns:
         :func:`scores` of the fused labels pooled over all windows, plus
@@ -195,16 +248,21 @@ def cross_validate(
     check_classes(ws)
     fold = recording_folds(ws, folds, seed)
     config = default_config(features) if config is None else config
-    spec = default_spec(ws, features, use_speed=use_speed)
+    if whisker is not None:
+        channels = ws.windows.shape[1] if ws.windows.ndim == 3 else 1
+        whisker = WhiskerResponse(whisker.record, whisker.amplifier, channels)
+    spec = default_spec(ws, features, use_speed=use_speed, whisker=whisker is not None,
+                        window_fit=window_fit)  # fmt: skip
     window_s = spec.window / spec.rate_hz
     context_s = default_context_s(features, window_s) if context_s is None else context_s
     check_context(context_s, window_s)
-    feats = features_of(ws, spec)
+    feats = features_of(ws, spec, whisker)
     proba = np.zeros((len(ws), len(ws.label_names)))
     for k in _progress(range(folds), progress, desc="folds"):
         test = fold == k
         model = fit_on_features(feats[~test], ws.subset(~test), spec,
-                                replace(config, seed=config.seed + seed + k))  # fmt: skip
+                                replace(config, seed=config.seed + seed + k),
+                                whisker=whisker)  # fmt: skip
         proba[test] = _proba_from_features(model, feats[test])
     lookback = max(context_s - window_s, 0.0)
     fused = fuse_context(proba, ws.recording, ws.starts(), lookback_s=lookback)

@@ -53,7 +53,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._choices import FEATURE_KINDS
-from ..fit import least_squares, to_interval
+from ..fit import fit_windows, least_squares, to_interval
 
 FeatureKind = Literal["fitted", "paper"]
 _EPS = 1e-12
@@ -79,6 +79,17 @@ class FeatureSpec:
         spatial_hi: Highest spatial frequency (cycles/m).
         channels: Signals per window (e.g. six IMU axes); each channel gets the same
             features and the vectors are concatenated, channel by channel.
+        deconvolve: Whisker-aware: each window is first put through the whisker's own
+            transfer function (:class:`WhiskerResponse`), recoloured to the model's
+            reference whisker, and (fitted) the base-motion band levels in dB are added
+            per channel. The numbers then need a whisker (:meth:`numbers`).
+        cross_channel: Add features of the two channels together (fitted, two channels):
+            coherence in four bands, orientation (``cos 2θ``, ``sin 2θ``) and axis ratio of
+            the motion ellipse, and the log power ratio of the channels.
+        window_fit: Add, per channel, a damped oscillation fitted to the window in the
+            time domain (:func:`whiskerid.fit.fit_windows`, all windows at once): its damped
+            frequency (over Nyquist), ζ, log amplitude over the window's RMS and the fit's
+            ``ok`` flag (fitted). Computed on the host, next to the compiled features.
     """
 
     kind: FeatureKind = "fitted"
@@ -93,6 +104,9 @@ class FeatureSpec:
     spatial_lo: float = 10.0
     spatial_hi: float = 330.0
     channels: int = 1
+    deconvolve: bool = False
+    cross_channel: bool = False
+    window_fit: bool = False
 
     def __post_init__(self):
         if self.kind not in FEATURE_KINDS:
@@ -107,11 +121,21 @@ class FeatureSpec:
             raise ValueError("need 0 < spatial_lo < spatial_hi")
         if self.channels < 1:
             raise ValueError(f"channels must be at least 1, not {self.channels}")
+        if self.deconvolve and self.channels > 2:
+            raise ValueError("whisker-aware features take one or two Hall sensors, "
+                             f"not {self.channels} channels")  # fmt: skip
+        if self.cross_channel and self.channels != 2:
+            raise ValueError("cross-channel features need exactly two channels")
 
     @property
     def n_features(self) -> int:
         """Length of the feature vector (all channels)."""
-        return self.channels * self._per_channel()
+        n = self.channels * self._per_channel()
+        if self.kind == "fitted" and self.deconvolve:
+            n += self.channels * (len(self.octave_edges()) - 1)
+        n += N_CROSS if self.kind == "fitted" and self.cross_channel else 0
+        return n + (self.channels * N_WINDOW_FIT if self.kind == "fitted" and self.window_fit
+                    else 0)  # fmt: skip
 
     @property
     def window_shape(self) -> tuple[int, ...]:
@@ -153,19 +177,38 @@ class FeatureSpec:
         return replace(self, rate_hz=_DEFAULT.rate_hz, spatial_lo=_DEFAULT.spatial_lo,
                        spatial_hi=_DEFAULT.spatial_hi)  # fmt: skip
 
-    def numbers(self) -> "Numbers":
+    def numbers(self, whisker=None, reference=None) -> "Numbers":
         """The physical numbers of this spec, as float64 arrays (traced when jitted).
 
         The bin frequencies and spacing and the reciprocal of Nyquist are computed here, on
         the host, with correctly rounded divisions: compiled code divides by a traced
         number through an inexact reciprocal, and the features would move in their last
         digit against those of a spec whose numbers are constants.
+
+        Args:
+            whisker: The :class:`WhiskerResponse` that recorded the windows; needed when
+                ``deconvolve``.
+            reference: The whisker the windows are recoloured to (a model's training
+                whisker); ``whisker`` by default.
         """
         n = self.window
         freqs = np.arange(n // 2 + 1, dtype=np.float64) / np.float64(1.0 / self.rate_hz * n)
         values = (self.rate_hz, self.rate_hz / n, freqs[1:], 2.0 / self.rate_hz,
                   self.spatial_lo, self.spatial_hi)  # fmt: skip
-        return Numbers(*(jnp.asarray(v, dtype=jnp.float64) for v in values))
+        plain = [jnp.asarray(v, dtype=jnp.float64) for v in values]
+        if not self.deconvolve:
+            empty = jnp.zeros((0,), dtype=jnp.complex128)
+            return Numbers(*plain, empty, empty)
+        if whisker is None:
+            raise ValueError(
+                "whisker-aware features need the whisker that recorded the windows (a "
+                "calibrated whisker record)"
+            )
+        reference = whisker if reference is None else reference
+        padded = np.fft.rfftfreq(2 * n, 1.0 / self.rate_hz)
+        recolour = whisker.recolour(reference, padded, self.rate_hz)
+        base = whisker.to_base(padded, self.rate_hz)
+        return Numbers(*plain, jnp.asarray(recolour), jnp.asarray(base))
 
 
 class Numbers(NamedTuple):
@@ -178,8 +221,16 @@ class Numbers(NamedTuple):
     per_nyquist: Float[Array, ""]
     spatial_lo: Float[Array, ""]
     spatial_hi: Float[Array, ""]
+    recolour: Array  # (bins of a 2×window FFT, channels, channels), complex; empty if unused
+    to_base: Array  # the same shape: codes to base acceleration (m/s²)
 
 
+#: Window-fit features per channel: damped frequency, ζ, log amplitude, ok.
+N_WINDOW_FIT = 4
+#: Cross-channel features: coherence in four bands, ellipse (cos 2θ, sin 2θ, axis ratio),
+#: log power ratio.
+N_CROSS = 8
+_COHERENCE_BANDS = 4
 _DEFAULT = FeatureSpec()
 
 
@@ -450,13 +501,86 @@ def window_features(spec: FeatureSpec, x, speed_mps=jnp.nan, numbers: Numbers | 
 
     ``x`` has shape ``spec.window_shape``: ``(window,)``, or ``(channels, window)`` whose
     channels are featurised alike and concatenated. ``numbers``: as in
-    :func:`fitted_features`.
+    :func:`fitted_features`; with ``spec.deconvolve`` they must carry a whisker.
     """
+    if spec.deconvolve or spec.cross_channel:
+        return _whisker_features(spec, x, speed_mps, spec.numbers() if numbers is None
+                                 else numbers)  # fmt: skip
     if x.ndim == 2:
         return jax.vmap(lambda c: window_features(spec, c, speed_mps, numbers))(x).reshape(-1)
     if spec.kind == "paper":
         return paper_features(x)
     return fitted_features(spec, x, speed_mps, numbers)
+
+
+def through_filter(xs, response):
+    """Windows ``(channels, n)`` through a per-bin channel matrix ``(bins, ch, ch)`` given
+    on the grid of a ``2n``-point FFT (zero-padded: a linear, not circular, filter).
+    The channels' means are removed first."""
+    n = xs.shape[-1]
+    spec = jnp.fft.rfft(xs - jnp.mean(xs, axis=-1, keepdims=True), 2 * n, axis=-1)
+    return jnp.fft.irfft(jnp.einsum("bij,jb->ib", response, spec), 2 * n, axis=-1)[:, :n]
+
+
+def base_band_levels(base, rate_hz, edges) -> jax.Array:
+    """Mean-square base acceleration in each band ``[edges[k], edges[k+1])`` in dB re
+    1 (m/s²)²: the Hann-windowed periodogram summed over the band's bins (``base``:
+    samples on the last axis)."""
+    n = base.shape[-1]
+    w = jnp.hanning(n)
+    x = base - jnp.mean(base, axis=-1, keepdims=True)
+    spec = jnp.fft.rfft(x * w, axis=-1)
+    power = 2 * jnp.abs(spec) ** 2 / (jnp.sum(w**2) * n)  # mean square per bin
+    f = jnp.fft.rfftfreq(n, 1.0 / rate_hz)
+    inside = (f[None, :] >= edges[:-1, None]) & (f[None, :] < edges[1:, None])
+    inside = inside.at[-1].set(inside[-1] | (f == edges[-1]))
+    return 10 * jnp.log10(power @ inside.T.astype(power.dtype) + 1e-20)
+
+
+def _cross_features(a, b):
+    """Coherence in four equal bands (Welch within the window), the motion ellipse and the
+    log power ratio of two zero-mean channels."""
+    n = a.shape[-1]
+    seg = max(n // 4, 8)
+    hop = seg // 2
+    starts = range(0, n - seg + 1, hop)
+    w = jnp.hanning(seg)
+    fa = jnp.stack([jnp.fft.rfft(a[s : s + seg] * w) for s in starts])
+    fb = jnp.stack([jnp.fft.rfft(b[s : s + seg] * w) for s in starts])
+    saa = jnp.mean(jnp.abs(fa) ** 2, axis=0)[1:]
+    sbb = jnp.mean(jnp.abs(fb) ** 2, axis=0)[1:]
+    sab = jnp.mean(fa * jnp.conj(fb), axis=0)[1:]
+    coh = jnp.abs(sab) ** 2 / jnp.maximum(saa * sbb, _EPS)
+    weight = saa + sbb
+    bands = jnp.array_split(jnp.arange(coh.shape[0]), _COHERENCE_BANDS)
+    coh_b = [jnp.sum(coh[i] * weight[i]) / jnp.maximum(jnp.sum(weight[i]), _EPS) for i in bands]
+    caa, cbb, cab = jnp.mean(a * a), jnp.mean(b * b), jnp.mean(a * b)
+    two_theta = jnp.arctan2(2 * cab, caa - cbb)
+    root = jnp.sqrt((caa - cbb) ** 2 + 4 * cab**2)
+    big, small = 0.5 * (caa + cbb + root), 0.5 * (caa + cbb - root)
+    ratio = jnp.sqrt(jnp.maximum(small, 0.0) / jnp.maximum(big, _EPS))
+    power_ratio = jnp.log(caa + _EPS) - jnp.log(cbb + _EPS)
+    return jnp.stack([*coh_b, jnp.cos(two_theta), jnp.sin(two_theta), ratio, power_ratio])
+
+
+def _whisker_features(spec: FeatureSpec, x, speed_mps, num: Numbers):
+    """Features with the whisker divided out and/or across channels (see the spec)."""
+    xs = x if x.ndim == 2 else x[None]
+    plain = replace(spec, deconvolve=False, cross_channel=False, channels=1)
+    base = None
+    if spec.deconvolve:
+        xs = through_filter(xs, num.recolour)
+        base = through_filter(x if x.ndim == 2 else x[None], num.to_base)
+    if spec.kind == "paper":
+        return jax.vmap(paper_features)(xs).reshape(-1)
+    parts = [jax.vmap(lambda c: fitted_features(plain, c, speed_mps, num))(xs).reshape(-1)]
+    if spec.deconvolve:
+        edges = octave_edges(spec.window, num.rate_hz, num.df_hz)
+        parts.append(base_band_levels(base, num.rate_hz, edges).reshape(-1))
+    if spec.cross_channel:
+        pair = base if base is not None else xs - jnp.mean(xs, axis=-1, keepdims=True)
+        parts.append(_cross_features(pair[0], pair[1]))
+    return jnp.concatenate(parts)
 
 
 def batch_features(structure: FeatureSpec, numbers: Numbers, windows, speeds):
@@ -469,7 +593,8 @@ def batch_features(structure: FeatureSpec, numbers: Numbers, windows, speeds):
 _batch_features = jax.jit(batch_features, static_argnums=0)
 
 
-def compute_features(spec: FeatureSpec, windows, speeds=None) -> jax.Array:
+def compute_features(spec: FeatureSpec, windows, speeds=None, numbers: Numbers | None = None
+                     ) -> jax.Array:  # fmt: skip
     """Features of a batch of windows, shape ``(n, spec.n_features)`` (float64).
 
     Args:
@@ -477,6 +602,8 @@ def compute_features(spec: FeatureSpec, windows, speeds=None) -> jax.Array:
         windows: Uniformly sampled windows at ``spec.rate_hz``, shape
             ``(n, *spec.window_shape)``.
         speeds: Robot speed per window (m/s); needed when ``spec.use_speed``.
+        numbers: The spec's numbers (:meth:`FeatureSpec.numbers`), needed with a whisker
+            for ``spec.deconvolve``; the spec's own by default.
     """
     windows = jnp.asarray(windows, dtype=float)
     if windows.shape[1:] != spec.window_shape:
@@ -487,4 +614,31 @@ def compute_features(spec: FeatureSpec, windows, speeds=None) -> jax.Array:
             raise ValueError("these features need the robot speed (speed_mps) of each window")
         speeds = jnp.full(windows.shape[0], jnp.nan)
     speeds = jnp.broadcast_to(jnp.asarray(speeds, dtype=float), (windows.shape[0],))
-    return _batch_features(spec.structure(), spec.numbers(), windows, speeds)
+    numbers = spec.numbers() if numbers is None else numbers
+    feats = _batch_features(spec.structure(), numbers, windows, speeds)
+    if not (spec.kind == "fitted" and spec.window_fit):
+        return feats
+    return jnp.concatenate([feats, jnp.asarray(window_fit_features(spec, windows))], axis=1)
+
+
+def window_fit_features(spec: FeatureSpec, windows) -> np.ndarray:
+    """The ``window_fit`` part of the features, shape ``(n, channels × 4)`` (zeros for
+    a spec without it): per channel, a damped oscillation fitted to each window by
+    :func:`whiskerid.fit.fit_windows`. A window whose fit fails gives zeros and ``ok = 0``.
+    """
+    windows = np.asarray(windows, dtype=float)
+    n = windows.shape[0]
+    if not (spec.kind == "fitted" and spec.window_fit) or n == 0:
+        return np.zeros((n, 0 if not spec.window_fit else spec.channels * N_WINDOW_FIT))
+    flat = windows.reshape(-1, spec.window)
+    fits = fit_windows(flat, rate_hz=spec.rate_hz)
+    ok = np.asarray(fits.ok)
+    rms = np.maximum(flat.std(axis=1), _EPS)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        parts = np.stack([np.asarray(fits.damped_frequency_hz) * 2 / spec.rate_hz,
+                          np.asarray(fits.zeta),
+                          np.log(np.asarray(fits.amplitude) / rms + _EPS),
+                          ok.astype(float)], axis=1)  # fmt: skip
+    parts = np.where(ok[:, None] & np.isfinite(parts), parts, 0.0)
+    parts[:, 3] = ok
+    return parts.reshape(n, -1)

@@ -28,23 +28,27 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._version import __version__
+from ..fit import sha256_of
 from ..io import Recording, RecordingError, atomic_folder
 from ._context import check_context, fuse_context
 from ._dataset import (
     check_rate,
     check_speed,
+    multi_windows,
     recording_signal,
+    recording_signals,
     recording_speed,
     signal_column,
     windows_of,
 )
-from ._features import FeatureSpec, batch_features, window_features
+from ._features import FeatureSpec, batch_features, window_features, window_fit_features
 from ._mlp import (
     MLP,
     from_arrays,
     pad_rows,
     to_arrays,
 )
+from ._whisker import WhiskerResponse
 
 MODEL_FORMAT = "whiskerid.classifier/2"  # /2: spectral-shape and envelope features
 MODEL_JSON = "model.json"
@@ -64,17 +68,18 @@ def _mean_proba(nets, z):
 
 
 @functools.partial(jax.jit, static_argnums=0)
-def _batch_proba(structure, numbers, nets, mean, std, windows, speeds):
+def _batch_proba(structure, numbers, nets, mean, std, windows, speeds, extra):
     """Class probabilities of a batch of windows: compiled once per feature structure,
-    network sizes and (padded) batch shape, for every model of that architecture."""
-    feats = batch_features(structure, numbers, windows, speeds)
+    network sizes and (padded) batch shape, for every model of that architecture.
+    ``extra``: features computed on the host (window fits), ``(n, 0)`` when none."""
+    feats = jnp.concatenate([batch_features(structure, numbers, windows, speeds), extra], axis=1)
     return _mean_proba(nets, (feats.astype(jnp.float32) - mean) / std)
 
 
 @functools.partial(jax.jit, static_argnums=0)
-def _window_proba(structure, numbers, nets, mean, std, window, speed):
+def _window_proba(structure, numbers, nets, mean, std, window, speed, extra):
     """Class probabilities of one window (see :func:`_batch_proba`)."""
-    feats = window_features(structure, window, speed, numbers)
+    feats = jnp.concatenate([window_features(structure, window, speed, numbers), extra])
     return _mean_proba(nets, (feats.astype(jnp.float32) - mean) / std)
 
 
@@ -94,7 +99,8 @@ class ClassifierModel:
 
     def __init__(self, spec: FeatureSpec, labels, mean, std, net: "MLP | list[MLP]", *,
                  hop: int, channel: str | None = None, info: dict | None = None,
-                 context_s: float | None = None):  # fmt: skip
+                 context_s: float | None = None,
+                 whisker: WhiskerResponse | None = None):  # fmt: skip
         self.spec = spec
         self.labels = tuple(labels)
         self.mean = np.asarray(mean, dtype=np.float32)
@@ -105,10 +111,39 @@ class ClassifierModel:
         self.channel = channel
         self.info = dict(info or {})
         self.context_s = self.window_s if context_s is None else context_s
+        self.whisker = whisker
+        self.recorded_with = whisker
+        if spec.deconvolve and whisker is None:
+            raise ValueError("a model with whisker-aware features needs its training whisker")
         # Device-resident arguments of the module-level compiled functions, which depend on
         # the architecture only: a warm call is one dispatch and one small transfer.
         self._structure = spec.structure()
-        self._args = (spec.numbers(), self.nets, jnp.asarray(self.mean), jnp.asarray(self.std))
+        self._args = (spec.numbers(whisker), self.nets, jnp.asarray(self.mean),
+                      jnp.asarray(self.std))  # fmt: skip
+
+    @property
+    def needs_whisker(self) -> bool:
+        """Whether the features divide out the recording whisker's transfer function."""
+        return self.spec.deconvolve
+
+    def use_whisker(self, whisker: WhiskerResponse) -> None:
+        """Run on windows recorded with another calibrated whisker: they are recoloured to
+        the training whisker (see :class:`WhiskerResponse`)."""
+        if not self.needs_whisker:
+            raise ValueError(
+                "this model's features are the raw signal's: it cannot take another whisker "
+                "into account (train with --whisker to make one that can)"
+            )
+        whisker = WhiskerResponse(whisker.record, whisker.amplifier, self.spec.channels)
+        self.recorded_with = whisker
+        self._args = (self.spec.numbers(whisker, self.whisker), *self._args[1:])
+
+    @property
+    def channels(self) -> tuple[str, ...] | None:
+        """The recorded columns the model reads, in order (None: the first column)."""
+        if self.channel is None:
+            return None
+        return tuple(self.channel.split(","))
 
     @property
     def rate_hz(self) -> float:
@@ -171,8 +206,9 @@ class ClassifierModel:
         # Padded (repeating the last window) to a size class: one compilation serves
         # recordings and datasets of many lengths.
         rows = np.minimum(np.arange(pad_rows(n)), n - 1)
-        p = _batch_proba(self._structure, *self._args, windows[rows], speeds[rows])
-        return np.asarray(p)[:n]
+        extra = window_fit_features(self.spec, windows[rows])
+        p = _batch_proba(self._structure, *self._args, windows[rows], speeds[rows], extra)
+        return _finite(np.asarray(p)[:n])
 
     def predict_windows(self, windows, speeds=None) -> tuple[np.ndarray, np.ndarray]:
         """Class index and confidence (its probability) per window."""
@@ -204,7 +240,8 @@ class ClassifierModel:
         if self.needs_speed:
             check_speed(speed)
         v = np.float64(np.nan if speed is None else speed)
-        return np.asarray(_window_proba(self._structure, *self._args, x, v))
+        extra = window_fit_features(self.spec, x[None])[0] if self.spec.window_fit else _NONE
+        return _finite(np.asarray(_window_proba(self._structure, *self._args, x, v, extra)))
 
     def classify_recording(self, rec: Recording, *, speed: float | None = None) -> dict:
         """Labels of every window of a recording, and one for the whole (mean probability).
@@ -215,7 +252,7 @@ class ClassifierModel:
         name (an NPY recording's is ``signal``).
         """
         if self.spec.channels != 1:
-            raise ValueError("classify_recording reads one channel; this model takes several")
+            return self._classify_channels(rec, speed=speed)
         if self.channel is not None and self.channel not in rec.columns and len(rec.columns) > 1:
             raise RecordingError(
                 f"{rec.source or 'recording'}: no column {self.channel!r}, the one the model "
@@ -230,6 +267,24 @@ class ClassifierModel:
             raise RecordingError(
                 f"{rec.source}: shorter than one window ({self.window / self.rate_hz:g} s)"
             )
+        return self._label_windows(rec, w, starts, used, speed)
+
+    def _classify_channels(self, rec: Recording, *, speed: float | None) -> dict:
+        """:meth:`classify_recording` for a model of several channels."""
+        names = self.channels
+        if names is None or len(names) != self.spec.channels:
+            raise ValueError(f"the model reads {self.spec.channels} channels but names {names}")
+        xs = recording_signals(rec, names)
+        check_rate(rec, self.rate_hz)
+        w, starts = multi_windows(rec.t, xs, rate_hz=self.rate_hz, window=self.window,
+                                  hop=self.hop)  # fmt: skip
+        if len(w) == 0:
+            raise RecordingError(
+                f"{rec.source}: shorter than one window ({self.window / self.rate_hz:g} s)"
+            )
+        return self._label_windows(rec, w, starts, self.channel, speed)
+
+    def _label_windows(self, rec, w, starts, used, speed) -> dict:
         if speed is None and self.needs_speed:
             speed = recording_speed(rec)
             if not np.isfinite(speed):
@@ -271,6 +326,7 @@ class ClassifierModel:
                        "before it (mean log-probability, renormalised)",
             "channel": self.channel,
             "labels": list(self.labels),
+            **({"whisker": self.whisker.to_dict()} if self.whisker is not None else {}),
             "normalisation": {"mean": self.mean.tolist(), "std": self.std.tolist()},
             "network": {"sizes": self.net.sizes, "hidden_activation": "relu",
                         "output": "softmax", "members": len(self.nets),
@@ -344,12 +400,67 @@ class ClassifierModel:
                 prefix = f"m{j}_"
                 mine = {k[len(prefix) :]: a for k, a in arrays.items() if k.startswith(prefix)}
                 nets.append(from_arrays(mine, sizes))
+            _check_weights(weights, arrays)
         except FileNotFoundError:
             raise ModelError(f"{weights}: missing model weights") from None
         except (ValueError, OSError, EOFError, zipfile.BadZipFile) as err:
             raise ModelError(f"{weights}: corrupt model weights ({err})") from None
+        whisker = None
+        if "whisker" in head:
+            try:
+                whisker = WhiskerResponse.from_dict(head["whisker"], spec.channels)
+            except (KeyError, TypeError, ValueError) as err:
+                raise ModelError(f"{head_file}: corrupt whisker in the header ({err})") from None
         try:
             return cls(spec, labels, mean, std, nets, hop=hop, channel=head.get("channel"),
-                       info=head.get("training", {}), context_s=context_s)  # fmt: skip
+                       info=head.get("training", {}), context_s=context_s,
+                       whisker=whisker)  # fmt: skip
         except ValueError as err:
             raise ModelError(f"{head_file}: corrupt model header ({err})") from None
+
+
+def recording_hashes(paths) -> list[str]:
+    """SHA-256 of each recording file that exists (what a model remembers of its training
+    data: the content, whatever the file is called later)."""
+    return [sha256_of(p) for p in map(Path, paths) if p.is_file()]
+
+
+def trained_on(model: ClassifierModel, paths) -> list[str]:
+    """The ones among ``paths`` whose content trained ``model`` (by SHA-256)."""
+    known = set(model.info.get("recordings_sha256", []))
+    if not known:
+        return []
+    return [str(p) for p in map(Path, paths) if p.is_file() and sha256_of(p) in known]
+
+
+#: Largest weight a trained network holds (weight decay keeps them of order one); beyond
+#: it the float32 logits overflow and every probability comes out NaN.
+MAX_WEIGHT = 1e6
+
+
+def _check_weights(path: Path, arrays: dict) -> None:
+    for name, a in arrays.items():
+        a = np.asarray(a, dtype=float)
+        if not np.isfinite(a).all():
+            raise ModelError(f"{path}: weights {name} are not finite: the file is corrupt; "
+                             "retrain with 'whiskerid train'")  # fmt: skip
+        if a.size and np.max(np.abs(a)) > MAX_WEIGHT:
+            raise ModelError(
+                f"{path}: weights {name} reach {np.max(np.abs(a)):.3g} (a trained network's "
+                f"stay below {MAX_WEIGHT:g}): the file is corrupt; retrain with 'whiskerid train'"
+            )
+
+
+#: No host-computed features: one device-resident empty row, reused by every call.
+_NONE = jnp.zeros((0,))
+
+
+def _finite(p: np.ndarray) -> np.ndarray:
+    """Class probabilities, refused when any is not finite (no label can be read from them)."""
+    if not np.isfinite(p).all():
+        raise ModelError(
+            "the model's class probabilities are not finite (overflowing weights or "
+            "normalisation, or non-finite samples): no label can be given; retrain the model "
+            "or check the recording"
+        )
+    return p

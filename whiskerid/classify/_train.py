@@ -9,15 +9,19 @@ from ._context import check_context, default_context_s
 from ._dataset import WindowSet
 from ._features import FeatureSpec, compute_features
 from ._mlp import TrainConfig, default_config, train_mlp
-from ._model_file import ClassifierModel
+from ._model_file import ClassifierModel, recording_hashes
 from ._split import grouped_split
+from ._whisker import WhiskerResponse
 
 
 def default_spec(
-    ws: WindowSet, features: str = "fitted", *, use_speed: bool | None = None
-) -> FeatureSpec:
+    ws: WindowSet, features: str = "fitted", *, use_speed: bool | None = None,
+    whisker: bool = False, window_fit: bool = False,
+) -> FeatureSpec:  # fmt: skip
     """Feature settings for a window set: its rate and window; speed features and absolute
-    octave levels when the speed is known.
+    octave levels when the speed is known; whisker-aware features with ``whisker`` (a
+    calibrated whisker is given); cross-channel features for two channels (two Hall
+    sensors).
 
     The spatial-frequency range is the one every training speed covers: bins from
     ``2 Δf`` at the slowest speed to Nyquist at the fastest.
@@ -25,7 +29,8 @@ def default_spec(
     window = ws.windows.shape[-1]
     channels = ws.windows.shape[1] if ws.windows.ndim == 3 else 1
     if features == "paper":
-        return FeatureSpec(kind="paper", rate_hz=ws.rate_hz, window=window, channels=channels)
+        return FeatureSpec(kind="paper", rate_hz=ws.rate_hz, window=window, channels=channels,
+                           deconvolve=whisker)  # fmt: skip
     use = ws.has_speed if use_speed is None else use_speed
     if use and not ws.has_speed:
         raise ValueError("speed features need speed_mps on every recording")
@@ -33,7 +38,8 @@ def default_spec(
     # how fast a run went as about the ground (BorealTC, runs held out: 1-4 points worse
     # with them; the synthetic set, where the speed is known: 1 point better).
     spec = FeatureSpec(kind="fitted", rate_hz=ws.rate_hz, window=window, octave_bands=use,
-                       use_speed=use, channels=channels)  # fmt: skip
+                       use_speed=use, channels=channels, deconvolve=whisker,
+                       cross_channel=channels == 2, window_fit=window_fit)  # fmt: skip
     if use:
         df, nyq = ws.rate_hz / window, ws.rate_hz / 2
         lo, hi = 2 * df / float(ws.speeds.min()), nyq / float(ws.speeds.max())
@@ -43,15 +49,38 @@ def default_spec(
     return spec
 
 
-def features_of(ws: WindowSet, spec: FeatureSpec) -> np.ndarray:
-    """Features of every window, shape ``(n, spec.n_features)``."""
+def features_of(ws: WindowSet, spec: FeatureSpec, whisker: WhiskerResponse | None = None
+                ) -> np.ndarray:  # fmt: skip
+    """Features of every window, shape ``(n, spec.n_features)`` (``whisker``: the one that
+    recorded them, for whisker-aware features).
+
+    Raises:
+        ValueError: Some windows give features that are not finite or beyond float32 (a
+            cell such as 1e308 in a recording): the recordings are named, since a network
+            trained on them could not be used.
+    """
     speeds = ws.speeds if (spec.kind == "fitted" and spec.use_speed) else None
-    return np.asarray(compute_features(spec, ws.windows, speeds))
+    numbers = spec.numbers(whisker) if spec.deconvolve else None
+    feats = np.asarray(compute_features(spec, ws.windows, speeds, numbers))
+    bad = ~np.all(np.isfinite(feats) & (np.abs(feats) < _FEATURE_LIMIT), axis=1)
+    if bad.any():
+        names = [ws.sources[r] for r in np.unique(ws.recording[bad])]
+        raise ValueError(
+            f"{len(names)} recording(s) give features that are not finite numbers (e.g. "
+            f"{names[0]}, window at {ws.starts()[np.flatnonzero(bad)[0]]:g} s): a sample there "
+            "is absurdly large (such as 1e308); mend or remove the recording(s)"
+        )
+    return feats
+
+
+#: Features beyond this cannot be standardised in float32, the networks' precision.
+_FEATURE_LIMIT = 1e30
 
 
 def fit_on_features(
     feats: np.ndarray, ws: WindowSet, spec: FeatureSpec, config: TrainConfig,
     *, val_fraction: float = 0.2, context_s: float | None = None,
+    whisker: WhiskerResponse | None = None,
 ) -> ClassifierModel:  # fmt: skip
     """Train on precomputed features of ``ws`` (validation: held-out recordings).
 
@@ -87,7 +116,7 @@ def fit_on_features(
             "seed": config.seed, "hidden": list(config.hidden),
             "weight_decay": config.weight_decay, "input_noise": config.input_noise}  # fmt: skip
     return ClassifierModel(spec, ws.label_names, mean, std, nets, hop=ws.windows.shape[-1],
-                           info=info, context_s=context_s)  # fmt: skip
+                           info=info, context_s=context_s, whisker=whisker)  # fmt: skip
 
 
 def check_classes(ws: WindowSet) -> None:
@@ -117,6 +146,8 @@ def train_classifier(
     channel: str | None = None,
     hop: int | None = None,
     context_s: float | None = None,
+    whisker: WhiskerResponse | None = None,
+    window_fit: bool = False,
 ) -> ClassifierModel:
     """Train a classifier on labelled windows.
 
@@ -131,14 +162,25 @@ def train_classifier(
         hop: Window step for whole recordings (samples); the window length by default.
         context_s: Signal each label rests on (s), fused over consecutive windows
             (:func:`fuse_context`); :func:`default_context_s` by default.
+        whisker: The calibrated whisker that recorded ``ws``: the features then divide out
+            its transfer function, and the model keeps it, so that it can run on another
+            calibrated whisker (:meth:`ClassifierModel.use_whisker`).
+        window_fit: Add per-window damped-oscillation fits (``fitted``; see
+            :class:`FeatureSpec`).
     """
     if config is None:
         config = default_config(features)
     check_classes(ws)
-    spec = default_spec(ws, features, use_speed=use_speed)
+    if whisker is not None:
+        channels = ws.windows.shape[1] if ws.windows.ndim == 3 else 1
+        whisker = WhiskerResponse(whisker.record, whisker.amplifier, channels)
+    spec = default_spec(ws, features, use_speed=use_speed, whisker=whisker is not None,
+                        window_fit=window_fit)  # fmt: skip
     if context_s is None:
         context_s = default_context_s(features, spec.window / spec.rate_hz)
-    model = fit_on_features(features_of(ws, spec), ws, spec, config, context_s=context_s)
+    model = fit_on_features(features_of(ws, spec, whisker), ws, spec, config,
+                            context_s=context_s, whisker=whisker)  # fmt: skip
+    model.info["recordings_sha256"] = recording_hashes(ws.sources)
     model.channel = ws.channel if channel is None else channel
     if hop is not None:
         model.hop = int(hop)

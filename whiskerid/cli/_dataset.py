@@ -40,6 +40,11 @@ def add_parser(sub) -> None:
     s.add_argument("--force", action="store_true",
                    help=FORCE_HELP + "; only recordings this simulator wrote are replaced, a "
                    "folder holding other recordings is refused")  # fmt: skip
+    s.add_argument("--channels", type=int, choices=(1, 2), default=1,
+                   help="Hall sensors: 1 (column adc, the vertical bending plane) or 2 "
+                   "(hall_a vertical, hall_b lateral: the paper's two orthogonal sensors; "
+                   "the record's [planes] table sets the lateral plane, gains, offsets and "
+                   "cross-talk)")  # fmt: skip
     s.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     s.set_defaults(func=run)
 
@@ -58,7 +63,9 @@ def run(args) -> dict:
     paths = synthesize_dataset(args.out, record=record, terrains=tuple(args.terrains),
                                speeds=tuple(args.speeds), runs=args.runs,
                                duration_s=args.duration, seed=args.seed,
-                               replace_synthetic=args.force)  # fmt: skip
+                               replace_synthetic=args.force,
+                               channels=args.channels)  # fmt: skip
     say(f"wrote {len(paths)} recordings to {args.out}")
     return {"out": str(args.out), "recordings": len(paths), "terrains": args.terrains,
-            "speeds_mps": args.speeds, "runs": args.runs, "duration_s": args.duration}  # fmt: skip
+            "speeds_mps": args.speeds, "runs": args.runs, "duration_s": args.duration,
+            "channels": args.channels}  # fmt: skip

@@ -2,6 +2,7 @@
 
 from pathlib import Path
 
+from ._classify import WHISKER_HELP, apply_whisker, warn_training_recordings
 from ._common import (
     CONTEXT_HELP,
     FORCE_HELP,
@@ -22,9 +23,10 @@ def add_parser(sub) -> None:
     e = sub.add_parser(
         "evaluate",
         help="score a classifier on a labelled dataset",
-        description="Accuracy, per-class accuracy and confusion matrix of MODEL on DATASET, "
-        "with labels per window and for whole recordings (the recordings labelled wrong "
-        "are named).",
+        description="Accuracy, precision, recall and F1 per class (with macro and weighted "
+        "averages) and the confusion matrix of MODEL on DATASET, with labels per window and "
+        "for whole recordings (the recordings labelled wrong are named). Recordings that "
+        "trained the model are pointed out.",
         formatter_class=HelpFormatter,
     )
     e.add_argument("model", type=Path, help="model folder (whiskerid train)")
@@ -34,6 +36,7 @@ def add_parser(sub) -> None:
     e.add_argument("--context", type=float, metavar="S",
                    help=CONTEXT_HELP + "; the model's by default")  # fmt: skip
     e.add_argument("--force", action="store_true", help=FORCE_HELP)
+    e.add_argument("--whisker", type=Path, metavar="TOML", help=WHISKER_HELP)
     e.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     e.set_defaults(func=run)
 
@@ -41,7 +44,7 @@ def add_parser(sub) -> None:
 def run(args) -> dict:
     """Score the model and print its confusion matrix; returns the JSON summary."""
     from ..classify import evaluate_classifier as evaluate
-    from ..classify import format_confusion, load_dataset
+    from ..classify import format_confusion, format_report, load_dataset
     from ..plot import plot_confusion
 
     check_outputs({"--plot": args.plot},
@@ -52,8 +55,12 @@ def run(args) -> dict:
                       rate_hz=model.rate_hz, labels=model.labels)  # fmt: skip
     if model.needs_speed and not ws.has_speed:
         raise CommandError(f"{args.model} needs speed_mps on every recording of {args.dataset}")
+    apply_whisker(model, args.whisker, ws.metas or [], args.model)
+    seen = warn_training_recordings(model, ws.sources)
     res = evaluate(model, ws)
+    res["training_recordings_evaluated"] = len(seen)
     say(format_confusion(res["confusion"], res["labels"]))
+    say(format_report(res["report"]))
     say(f"accuracy {res['accuracy']:.4f} on {res['n_windows']} windows, labels resting on "
         f"{model.context_s:g} s (each window on its own: "
         f"{res['accuracy_per_window']:.4f}; whole recordings: "

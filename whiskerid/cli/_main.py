@@ -16,6 +16,7 @@ import time
 import zipfile
 
 from . import (
+    _analyze,
     _calibrate,
     _classify,
     _dataset,
@@ -82,6 +83,7 @@ def build_parser() -> argparse.ArgumentParser:
     _evaluate.add_parser(sub)
     _classify.add_parser(sub)
     _record.add_parser(sub)
+    _analyze.add_parser(sub)
     _stream.add_parser(sub)
     return parser
 

@@ -43,8 +43,22 @@ def add_parser(sub) -> None:
     t.add_argument(
         "--channel",
         help="column to classify (by default the first signal column, which must then be the "
-        "same in every recording; kept in the model)",
+        "same in every recording; kept in the model); several columns joined by commas "
+        "(hall_a,hall_b: the two Hall sensors) or 'all' make windows of several channels",
     )
+    t.add_argument(
+        "--whisker", type=Path, metavar="TOML",
+        help="calibrated record of the whisker that made the recordings (whiskerid "
+        "calibrate): the features then divide out its own response (base-motion band "
+        "levels in dB, the windows recoloured to it), and the model keeps it, so that "
+        "classify/evaluate --whisker can run it on another calibrated whisker",
+    )  # fmt: skip
+    t.add_argument(
+        "--modal-fit", action="store_true",
+        help="with --features fitted: add a damped oscillation fitted to each window in the "
+        "time domain (all windows at once): its frequency, zeta, amplitude and whether the "
+        "fit converged, per channel",
+    )  # fmt: skip
     t.add_argument("--window", type=float, default=1.0, help="window length (s)")
     t.add_argument("--hop", type=float, help="window step (s); the window length by default")
     t.add_argument(
@@ -95,10 +109,13 @@ def run(args) -> dict:
     """Train (and cross-validate), write the model folder; returns the JSON summary."""
     from ..classify import cross_validate, load_dataset, train_classifier
 
-    check_outputs({"--out": args.out}, {"DATASET": args.dataset}, force=args.force,
-                  folders=("--out",))  # fmt: skip
+    check_outputs({"--out": args.out},
+                  {"DATASET": args.dataset, "--whisker": getattr(args, "whisker", None)},
+                  force=args.force, folders=("--out",))  # fmt: skip
     if args.window <= 0:
         raise CommandError("--window must be positive")
+    if args.modal_fit and args.features != "fitted":
+        raise CommandError("--modal-fit goes with --features fitted")
     if args.cv is not None and args.cv < 2:
         raise CommandError(f"--cv must be at least 2 folds, not {args.cv}")
     # Settings first: bad ones are refused before the data is read.
@@ -107,11 +124,13 @@ def run(args) -> dict:
                       hop_s=args.hop, rate_hz=args.rate)  # fmt: skip
     hop = None if args.hop is None else round(args.hop * ws.rate_hz)
     use_speed = False if args.no_speed else None
+    whisker = _whisker(args.whisker, ws)
     cv = None
     if args.cv is not None:
         cv = cross_validate(ws, features=args.features, folds=args.cv, seed=args.seed,
                             config=config, context_s=args.context, use_speed=use_speed,
-                            progress=show_progress(args))  # fmt: skip
+                            progress=show_progress(args), whisker=whisker,
+                            window_fit=args.modal_fit)  # fmt: skip
         cv = {k: cv[k] for k in ("folds", "accuracy", "accuracy_per_window", "per_class",
                                  "accuracy_by_fold", "context_s", "accuracy_per_recording",
                                  "n_recordings")}  # fmt: skip
@@ -119,8 +138,9 @@ def run(args) -> dict:
             f"({cv['accuracy_per_window']:.3f} per window; whole recordings "
             f"{cv['accuracy_per_recording']:.3f} of {cv['n_recordings']})")  # fmt: skip
     model = train_classifier(ws, features=args.features, config=config,
-                             use_speed=use_speed, channel=args.channel, hop=hop,
-                             context_s=args.context)  # fmt: skip
+                             use_speed=use_speed, channel=None, hop=hop,
+                             context_s=args.context, whisker=whisker,
+                             window_fit=args.modal_fit)  # fmt: skip
     if cv is not None:
         model.info["cross_validation"] = cv
     model.save(args.out)
@@ -130,7 +150,19 @@ def run(args) -> dict:
         f"wrote {args.out}")  # fmt: skip
     return {"out": str(args.out), "features": args.features, "labels": list(model.labels),
             "rate_hz": ws.rate_hz, "window": model.window, "windows": len(ws),
-            "use_speed": model.needs_speed, "context_s": model.context_s, **info}  # fmt: skip
+            "use_speed": model.needs_speed, "context_s": model.context_s,
+            "channel": model.channel,
+            "whisker": None if whisker is None else whisker.record.name, **info}  # fmt: skip
+
+
+def _whisker(path: Path | None, ws):
+    """The calibrated whisker of ``--whisker`` with the recordings' amplifier, or None."""
+    if path is None:
+        return None
+    from ..classify import WhiskerResponse, recorded_amplifier
+    from ..model import load_record
+
+    return WhiskerResponse(load_record(path), recorded_amplifier(ws.metas or []))
 
 
 def _config(args):

@@ -6,8 +6,10 @@ optional ``plot`` extra).
 
 from ._calibrate import plot_calibration as plot_calibration
 from ._classify import plot_confusion as plot_confusion
+from ._plot import plot_dominant_frequencies as plot_dominant_frequencies
 from ._plot import plot_modal_analysis as plot_modal_analysis
 from ._plot import plot_recording_labels as plot_recording_labels
 from ._plot import plot_signal_and_spectrum as plot_signal_and_spectrum
+from ._plot import real_peaks as real_peaks
 from ._posterior import plot_corner as plot_corner
 from ._posterior import plot_trace as plot_trace

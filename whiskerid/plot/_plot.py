@@ -19,11 +19,36 @@ def _pyplot():
     return plt
 
 
+#: A labelled peak stands this many times above the spectrum's local median (12 dB) ...
+PEAK_OVER_FLOOR = 4.0
+#: ... and at least this fraction of the largest peak (−30 dB): smaller ones are noise bumps.
+PEAK_MIN_RELATIVE = 0.03
+
+
+def real_peaks(freqs: np.ndarray, amps: np.ndarray, n: int = 3, *,
+               min_separation_hz: float = 8.0) -> list:  # fmt: skip
+    """The ``n`` largest peaks that stand out of the noise: at least
+    :data:`PEAK_OVER_FLOOR` times the running median of the spectrum around them (over a
+    twentieth of the band) and :data:`PEAK_MIN_RELATIVE` of the largest. A spectrum of
+    white noise has none."""
+    amps = np.asarray(amps, dtype=float)
+    half = max(amps.size // 40, 3)
+    pad = np.pad(amps, half, mode="edge")
+    floor = np.median(np.lib.stride_tricks.sliding_window_view(pad, 2 * half + 1), axis=1)
+    cands = find_peaks(freqs, amps, n=4 * n, min_separation_hz=min_separation_hz,
+                       min_relative=PEAK_MIN_RELATIVE)  # fmt: skip
+    df = freqs[1] - freqs[0] if freqs.size > 1 else 1.0
+    idx = np.clip(np.round((np.array([p.frequency_hz for p in cands]) - freqs[0]) / df)
+                  .astype(int), 0, amps.size - 1) if cands else []  # fmt: skip
+    keep = [p for p, i in zip(cands, idx, strict=True) if p.amplitude > PEAK_OVER_FLOOR * floor[i]]
+    return keep[:n]
+
+
 def _spectrum_axes(ax, t, x, *, label: str, n_peaks: int = 3) -> None:
     _, xu, rate = resample_uniform(t, x)
     freqs, amps = amplitude_spectrum(xu, rate)
     ax.semilogy(freqs, np.maximum(amps, 1e-30), lw=0.8)
-    for p in find_peaks(freqs, amps, n=n_peaks, min_separation_hz=8.0):
+    for p in real_peaks(freqs, amps, n_peaks):
         ax.annotate(
             f"{p.frequency_hz:.1f} Hz",
             (p.frequency_hz, p.amplitude),
@@ -118,6 +143,53 @@ def plot_recording_labels(path: str | Path, t: np.ndarray, x: np.ndarray, result
     ax_l.grid(axis="y", alpha=0.3)
     ax_l.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7)  # off the points
     fig.suptitle(title or f"{result['label']} (mean probability {result['confidence']:.2f})")
+    return _save(fig, path)
+
+
+def plot_dominant_frequencies(path: str | Path, analysis: dict) -> Path:
+    """One panel per terrain: the dominant frequency components against the robot's speed
+    (:func:`whiskerid.classify.analyze_dataset`): the dominant one of the mean spectrum
+    filled, with the spread of the recordings' own dominant frequencies (grey dots) as an
+    error bar, the next ones open, each marker's area following its amplitude relative to
+    the dominant one."""
+    plt = _pyplot()
+    groups = analysis["groups"]
+    labels = list(groups)
+    ncols = min(4, len(labels))
+    nrows = -(-len(labels) // ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(3.2 * ncols, 2.8 * nrows), sharey=True,
+                             constrained_layout=True, squeeze=False)  # fmt: skip
+    for ax, label in zip(axes.flat, labels, strict=False):
+        for k, (speed, g) in enumerate(sorted(groups[label].items(), key=lambda kv: kv[0])):
+            v = float(speed) if speed != "None" else float(k)
+            comps = g["components"]
+            if not comps:
+                continue
+            top, first = comps[0][1], k == 0
+            ax.scatter([v] * len(g["recording_dominant_hz"]), g["recording_dominant_hz"], s=8,
+                       color="0.6", zorder=1, label="each recording's dominant" if first
+                       else None)  # fmt: skip
+            ax.errorbar(v, g["dominant_hz"], yerr=g["dominant_spread_hz"], fmt="o", color="C0",
+                        ms=6, capsize=3, zorder=3, label="dominant" if first else None)  # fmt: skip
+            for j, (f, a) in enumerate(comps[1:]):
+                name = "next components" if first and j == 0 else None
+                ax.scatter(v, f, s=60 * max(a / top, 0.05), facecolors="none",
+                           edgecolors="C1", zorder=2, label=name)  # fmt: skip
+        ax.set_ylim(0, analysis["rate_hz"] / 2)
+        ax.set_title(label, fontsize=10)
+        if "None" in groups[label]:  # recordings without speed_mps: one column, no axis
+            ax.set_xticks([])
+            ax.set_xlabel("speed not recorded")
+        else:
+            ax.set_xlabel("speed (m/s)")
+        ax.grid(alpha=0.3)
+    for ax in axes[:, 0]:
+        ax.set_ylabel("frequency (Hz)")
+    for ax in list(axes.flat)[len(labels) :]:
+        ax.axis("off")
+    axes.flat[0].legend(fontsize=7, loc="upper left")
+    fig.suptitle(f"dominant frequency components by terrain and speed "
+                 f"({analysis['resolution_hz']:g} Hz resolution)", fontsize=11)  # fmt: skip
     return _save(fig, path)
 
 

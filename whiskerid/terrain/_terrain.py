@@ -333,6 +333,64 @@ def base_acceleration(
     Returns:
         ``(t, acc)`` (s, m/s²).
     """
+    t, acc, _ = _body_motion(terrain, speed_mps, duration_s, rng, rate_hz, vary_run, None)
+    return t, acc
+
+
+def base_acceleration_planes(
+    terrain: str | TerrainFamily,
+    speed_mps: float,
+    duration_s: float,
+    rng: np.random.Generator,
+    lateral_rng: np.random.Generator,
+    *,
+    rate_hz: float = INTERNAL_RATE_HZ,
+    vary_run: bool = True,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Base acceleration in the whisker's two bending planes (m/s²), shape ``(2, n)``.
+
+    Row 0 is the vertical plane, exactly :func:`base_acceleration` for the same ``rng``;
+    row 1 the lateral plane (see :data:`LATERAL_MODEL`), whose own random draws come from
+    ``lateral_rng``, so that adding the second plane leaves the first unchanged.
+
+    Returns:
+        ``(t, acc)`` (s, m/s²).
+    """
+    t, vert, lat = _body_motion(terrain, speed_mps, duration_s, rng, rate_hz, vary_run,
+                                lateral_rng)  # fmt: skip
+    return t, np.stack([vert, lat])
+
+
+#: How the simulator moves the whisker base sideways (the lateral bending plane).
+LATERAL_MODEL = """
+The whisker points forward, horizontally, from a mount ``MOUNT_HEIGHT_M`` above the wheel
+hubs. Sideways, the base moves for two reasons on rough ground:
+
+* roll: the left and right wheels ride on different heights, so the body rolls by
+  ``(z_left − z_right)/TRACK_M`` (front and rear axle weighted like the heave) through the
+  same contact spring–damper as the heave, and the mount sways by the roll angle times its
+  height. Shared texture (joints, ripples, striations) lifts both tracks alike and does
+  not roll the body; independent roughness, tufts and clods do. This is the part of the
+  lateral motion that carries the terrain;
+* skid: a four-wheeled robot without steering scrubs its tyres sideways; on uneven ground
+  the normal loads and so the side forces fluctuate, a broadband lateral vibration (up to
+  about 40 Hz, the tyres' lateral compliance) whose level follows the vertical vibration
+  (``SKID_LEVEL`` times its RMS, with a run-to-run factor of 1.4).
+
+The drivetrain's shaft tone reaches the mount in both planes (at half the level sideways,
+with its own phase). Why this model: it uses only what the paper states of the robot (a
+270 mm long, 130 mm wide four-wheeled car with 30 mm wide, 70 mm wheels and a whisker
+mounted on a platform above it) and the profiles already simulated, and it makes the two
+planes partly coherent (the drivetrain, the vertical level) and partly independent (roll
+and skid), as two orthogonal sensors on one whisker are.
+"""
+TRACK_M = 0.10  # wheel centre to centre across a 130 mm wide robot on 30 mm wheels
+MOUNT_HEIGHT_M = 0.12  # whisker base above the wheel hubs (m)
+SKID_LEVEL = 0.3
+
+
+def _body_motion(terrain, speed_mps, duration_s, rng, rate_hz, vary_run, lateral_rng):
+    """Vertical (and, with ``lateral_rng``, lateral) base acceleration on one grid."""
     fam = TERRAIN_FAMILIES[terrain] if isinstance(terrain, str) else terrain
     if vary_run:
         fam = vary(fam, rng)
@@ -340,15 +398,32 @@ def base_acceleration(
     t = np.arange(-SETTLE_S, duration_s + TAIL_S, 1.0 / rate_hz)
     margin = WHEELBASE_M + 4 * WHEEL_RADIUS_M
     x, z = terrain_profile(fam, v * (t[-1] - t[0]) + 2 * margin, rng)
-    zw = wheel_filter(z, x[1] - x[0], patch_m=fam.patch_m).mean(axis=0)
+    tracks = wheel_filter(z, x[1] - x[0], patch_m=fam.patch_m)
     pos = margin + v * (t - t[0])
-    heave = 0.75 * np.interp(pos + WHEELBASE_M, x, zw) + 0.25 * np.interp(pos, x, zw)
-    heave = heave - np.polyval(np.polyfit(t, heave, 1), t)  # a slope is no vibration
     f = np.fft.rfftfreq(t.size, 1.0 / rate_hz)
     lowpass = 1.0 / (1.0 + (f / (0.3 * rate_hz)) ** 8)  # keep the grid's content band-limited
-    spec = np.fft.rfft(heave) * ground_transmissibility(f, fam.ground_hz, fam.ground_zeta)
-    acc = np.fft.irfft(-((2 * np.pi * f) ** 2) * lowpass * spec, t.size)
-    return t, acc + _drivetrain(t, v, rng, lowpass, f)
+    h_g = ground_transmissibility(f, fam.ground_hz, fam.ground_zeta)
+
+    def to_acc(height):
+        height = height - np.polyval(np.polyfit(t, height, 1), t)  # a slope is no vibration
+        spec = np.fft.rfft(height) * h_g
+        return np.fft.irfft(-((2 * np.pi * f) ** 2) * lowpass * spec, t.size)
+
+    def axles(zw):
+        return 0.75 * np.interp(pos + WHEELBASE_M, x, zw) + 0.25 * np.interp(pos, x, zw)
+
+    terrain_acc = to_acc(axles(tracks.mean(axis=0)))
+    vert = terrain_acc + _drivetrain(t, v, rng, lowpass, f)
+    if lateral_rng is None:
+        return t, vert, None
+    sway = to_acc(MOUNT_HEIGHT_M * axles(tracks[0] - tracks[1]) / TRACK_M)
+    skid = np.fft.irfft(np.fft.rfft(lateral_rng.standard_normal(t.size))
+                        / (1.0 + (f / 40.0) ** 4), t.size)  # fmt: skip
+    skid *= (
+        SKID_LEVEL * _lognormal(lateral_rng, 0.35) * np.std(terrain_acc) / (np.std(skid) + 1e-30)
+    )
+    lat = sway + skid + 0.5 * _drivetrain(t, v, lateral_rng, lowpass, f)
+    return t, vert, lat
 
 
 def _drivetrain(t, v, rng, lowpass, f) -> np.ndarray:
@@ -396,6 +471,121 @@ def hall_voltage(whisker: Whisker, hall: HallSensor, grid_t, acc):
     return hall.voltage(_deflection(whisker, grid_t, acc))
 
 
+#: Column names of a two-sensor recording: sensor A reads the vertical plane, B the lateral.
+PLANE_COLUMNS = ("hall_a", "hall_b")
+_PLANE_KEYS = {"lateral_frequency_ratio", "lateral_zeta", "gain_ratio_b", "offset_b_v",
+               "cross_talk"}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class SensorPlanes:
+    """The whisker's two bending planes and its two orthogonal Hall sensors.
+
+    A record's optional ``[planes]`` table holds these (:meth:`from_record`); an
+    axisymmetric coil without one has the same modes in both planes.
+
+    Attributes:
+        lateral_frequency_ratio: Natural frequencies in the lateral plane over those in the
+            vertical one (a slightly flattened coil: a few per cent off 1); the lateral
+            ``κ`` is the vertical one times its square.
+        lateral_zeta: Modal damping in the lateral plane (one value or one per mode); the
+            record's ``[damping] zeta`` when None.
+        gain_ratio_b: Gain of sensor B (lateral) over sensor A's (the record's Hall gain).
+        offset_b_v: Output of sensor B at rest (V); sensor A's when None.
+        cross_talk: Fraction of the other plane's deflection each sensor reads (a sensor
+            tilted by an angle θ off its plane reads ``sin θ`` of the other one).
+    """
+
+    lateral_frequency_ratio: float = 1.0
+    lateral_zeta: float | tuple[float, ...] | None = None
+    gain_ratio_b: float = 1.0
+    offset_b_v: float | None = None
+    cross_talk: float = 0.0
+
+    def __post_init__(self):
+        if not (np.isfinite(self.lateral_frequency_ratio) and
+                0.2 < self.lateral_frequency_ratio < 5):  # fmt: skip
+            raise ValueError(
+                f"planes.lateral_frequency_ratio = {self.lateral_frequency_ratio!r} must lie "
+                "between 0.2 and 5"
+            )
+        if not (np.isfinite(self.gain_ratio_b) and self.gain_ratio_b != 0):
+            raise ValueError(f"planes.gain_ratio_b = {self.gain_ratio_b!r} must be non-zero")
+        if not (np.isfinite(self.cross_talk) and abs(self.cross_talk) < 0.5):
+            raise ValueError(f"planes.cross_talk = {self.cross_talk!r} must lie within ±0.5")
+        zetas = np.atleast_1d(np.asarray(
+            0.0 if self.lateral_zeta is None else self.lateral_zeta, dtype=float))  # fmt: skip
+        if not (np.isfinite(zetas).all() and (zetas >= 0).all() and (zetas < 1).all()):
+            raise ValueError(
+                f"planes.lateral_zeta = {self.lateral_zeta!r} must satisfy 0 <= zeta < 1"
+            )
+
+    @classmethod
+    def from_record(cls, record: WhiskerRecord) -> "SensorPlanes":
+        """The record's ``[planes]`` table (defaults where it has none).
+
+        Raises:
+            ValueError: Unknown keys or values out of range, named.
+        """
+        table = dict(record.extra.get("planes", {}))
+        unknown = sorted(set(table) - _PLANE_KEYS)
+        if unknown:
+            raise ValueError(f"[planes]: unknown key(s) {unknown}; known: {sorted(_PLANE_KEYS)}")
+        if isinstance(table.get("lateral_zeta"), list):
+            table["lateral_zeta"] = tuple(float(z) for z in table["lateral_zeta"])
+        return cls(**table)
+
+    def to_table(self) -> dict:
+        """The ``[planes]`` table (None values left out)."""
+        out = {k: getattr(self, k) for k in sorted(_PLANE_KEYS) if getattr(self, k) is not None}
+        if isinstance(out.get("lateral_zeta"), tuple):
+            out["lateral_zeta"] = list(out["lateral_zeta"])
+        return out
+
+    def whiskers(self, record: WhiskerRecord) -> tuple[Whisker, Whisker]:
+        """The vertical and lateral :class:`Whisker` of ``record``."""
+        vertical = record.whisker()
+        zeta = vertical.zeta if self.lateral_zeta is None else jnp.broadcast_to(
+            jnp.asarray(self.lateral_zeta, dtype=float), vertical.zeta.shape)  # fmt: skip
+        lateral = eqx.tree_at(lambda w: (w.EI, w.zeta), vertical,
+                              (vertical.EI * self.lateral_frequency_ratio**2, zeta))  # fmt: skip
+        return vertical, lateral
+
+    def halls(self, record: WhiskerRecord, amplifier: float = AMPLIFIER) -> tuple[HallSensor, ...]:
+        """Sensors A and B, amplifier included."""
+        a = amplified_hall(record, amplifier)
+        b = HallSensor(
+            gain_v_per_m=a.gain_v_per_m * self.gain_ratio_b,
+            offset_v=a.offset_v if self.offset_b_v is None else self.offset_b_v,
+            quadratic_v_per_m2=a.quadratic_v_per_m2 * self.gain_ratio_b,
+        )
+        return a, b
+
+    def mixing(self) -> np.ndarray:
+        """What each sensor reads of each plane's deflection: rows A, B; columns vertical,
+        lateral."""
+        c = self.cross_talk
+        return np.array([[1.0, c], [c, 1.0]])
+
+
+@eqx.filter_jit
+def _sensor_chain_planes(whiskers, halls, mix, grid_t, acc, t_samples, conv_time, n_avg: int):
+    """Two sensors' voltages averaged over each conversion, for a batch of runs (vmapped).
+
+    ``acc`` is ``(runs, 2, grid)``: vertical and lateral base acceleration.
+    """
+
+    def one(acc, t_samples, conv_time):
+        w = jnp.stack([_deflection(wk, grid_t, a) for wk, a in zip(whiskers, acc, strict=True)])
+        field = mix @ w
+        offsets = -(jnp.arange(n_avg) + 0.5) / n_avg * conv_time
+        tt = t_samples[:, None] + offsets[None, :]
+        return jnp.stack([jnp.mean(h.voltage(jnp.interp(tt, grid_t, f)), axis=1)
+                          for h, f in zip(halls, field, strict=True)])  # fmt: skip
+
+    return jax.vmap(one)(acc, t_samples, conv_time)
+
+
 @eqx.filter_jit
 def _sensor_chain(whisker, hall, grid_t, acc, t_samples, conv_time, n_avg: int):
     """Hall voltage averaged over each conversion, for a batch of runs (vmapped)."""
@@ -418,10 +608,47 @@ class RunSpec:
     run: int
 
 
-def _run_rng(seed: int, spec: RunSpec) -> np.random.Generator:
+def _run_rng(seed: int, spec: RunSpec, *stream: int) -> np.random.Generator:
     return np.random.default_rng(
-        [seed, TERRAINS.index(spec.terrain), round(spec.speed_mps * 1000), spec.run]
+        [seed, TERRAINS.index(spec.terrain), round(spec.speed_mps * 1000), spec.run, *stream]
     )
+
+
+def run_base_motion(
+    spec: RunSpec, *, duration_s: float = 30.0, seed: int = 0, channels: int = 1
+) -> tuple[np.ndarray, np.ndarray]:
+    """The base acceleration :func:`synthesize_runs` drives one run's whisker with.
+
+    Returns:
+        ``(t, acc)`` on the internal grid (s, m/s²): ``acc`` of shape ``(n,)`` (vertical),
+        or ``(2, n)`` (vertical, lateral) for ``channels = 2``.
+    """
+    return _run_motion(spec, duration_s, seed, channels)[:2]
+
+
+def _run_motion(spec: RunSpec, duration_s: float, seed: int, channels: int):
+    rng = _run_rng(seed, spec)
+    if channels == 1:
+        t, acc = base_acceleration(spec.terrain, spec.speed_mps, duration_s, rng)
+    else:
+        t, acc = base_acceleration_planes(spec.terrain, spec.speed_mps, duration_s, rng,
+                                          _run_rng(seed, spec, 1))  # fmt: skip
+    return t, acc, rng
+
+
+def _check_runs(specs, duration_s, rate_hz, channels) -> None:
+    for s in specs:
+        if s.terrain not in TERRAIN_FAMILIES:
+            raise ValueError(f"unknown terrain {s.terrain!r}; known: {', '.join(TERRAINS)}")
+        if not 0 < s.speed_mps < 5:
+            raise ValueError(f"speed {s.speed_mps!r} m/s is not plausible (0 < v < 5)")
+    if not (np.isfinite(duration_s) and np.isfinite(rate_hz)) or duration_s * rate_hz < 2:
+        raise ValueError(
+            f"duration_s = {duration_s!r} and rate_hz = {rate_hz!r} must be numbers giving "
+            "at least 2 samples"
+        )
+    if channels not in (1, 2):
+        raise ValueError(f"channels must be 1 (one Hall sensor) or 2 (two), not {channels!r}")
 
 
 def synthesize_runs(
@@ -435,8 +662,9 @@ def synthesize_runs(
     noise_v_rms: float = 2.5e-4,
     amplifier: float = AMPLIFIER,
     batch: int = 24,
+    channels: int = 1,
 ) -> list[Recording]:
-    """Synthesise recordings (ADS1115 codes, column ``adc``) of the given runs.
+    """Synthesise recordings (ADS1115 codes) of the given runs.
 
     Args:
         specs: What to synthesise.
@@ -450,41 +678,46 @@ def synthesize_runs(
             the record's bare Hall gain; ×20 makes terrain vibration span tens to hundreds
             of codes around the offset.
         batch: Runs simulated per vmapped call (bounds memory).
+        channels: 1: one Hall sensor in the vertical plane, column ``adc``; 2: the paper's
+            two orthogonal sensors, columns ``hall_a`` (vertical) and ``hall_b`` (lateral),
+            the record's ``[planes]`` table giving the lateral plane and sensor B
+            (:class:`SensorPlanes`, :data:`LATERAL_MODEL`). Both channels are converted
+            together (one two-channel sample per host tick). The vertical plane of a
+            two-channel run is the one-channel run's.
     """
+    return list(iter_runs(specs, record=record, duration_s=duration_s, rate_hz=rate_hz,
+                          seed=seed, jitter_s=jitter_s, noise_v_rms=noise_v_rms,
+                          amplifier=amplifier, batch=batch, channels=channels))  # fmt: skip
+
+
+def iter_runs(
+    specs: list[RunSpec],
+    *,
+    record: WhiskerRecord | None = None,
+    duration_s: float = 30.0,
+    rate_hz: float = 200.0,
+    seed: int = 0,
+    jitter_s: float = 2e-4,
+    noise_v_rms: float = 2.5e-4,
+    amplifier: float = AMPLIFIER,
+    batch: int = 24,
+    channels: int = 1,
+):
+    """:func:`synthesize_runs` one batch at a time: yields each recording as soon as its
+    batch is simulated (memory bounded by ``batch`` runs, whatever the number of runs)."""
     record = paper_record() if record is None else record
-    for s in specs:
-        if s.terrain not in TERRAIN_FAMILIES:
-            raise ValueError(f"unknown terrain {s.terrain!r}; known: {', '.join(TERRAINS)}")
-        if not 0 < s.speed_mps < 5:
-            raise ValueError(f"speed {s.speed_mps!r} m/s is not plausible (0 < v < 5)")
-    if not (np.isfinite(duration_s) and np.isfinite(rate_hz)) or duration_s * rate_hz < 2:
-        raise ValueError(
-            f"duration_s = {duration_s!r} and rate_hz = {rate_hz!r} must be numbers giving "
-            "at least 2 samples"
-        )
-    whisker = record.whisker()
-    hall = amplified_hall(record, amplifier)
-    rows = []
-    for spec in specs:
-        rng = _run_rng(seed, spec)
-        t_grid, acc = base_acceleration(spec.terrain, spec.speed_mps, duration_s, rng)
-        adc = replace(record.adc, jitter_s=jitter_s, clock_error=float(rng.uniform(-0.05, 0.05)))
-        rows.append((t_grid, acc, adc.sample_times(rate_hz, duration_s, rng=rng), adc, rng))
-    out = []
-    for lo in range(0, len(rows), batch):
-        chunk = rows[lo : lo + batch]
-        volts = np.asarray(
-            _sensor_chain(
-                whisker,
-                hall,
-                jnp.asarray(chunk[0][0]),
-                jnp.asarray(np.stack([r[1] for r in chunk])),
-                jnp.asarray(np.stack([r[2] for r in chunk])),
-                jnp.asarray([r[3].conversion_time_s for r in chunk]),
-                record.adc.averaging_points,
-            )
-        )
-        for (_, _, ts, adc, rng), v, spec in zip(chunk, volts, specs[lo:], strict=False):
+    _check_runs(specs, duration_s, rate_hz, channels)
+    planes = SensorPlanes.from_record(record) if channels == 2 else None
+    for lo in range(0, len(specs), max(batch, 1)):
+        chunk = specs[lo : lo + batch]
+        rows = []
+        for spec in chunk:
+            t_grid, acc, rng = _run_motion(spec, duration_s, seed, channels)
+            adc = replace(record.adc, jitter_s=jitter_s,
+                          clock_error=float(rng.uniform(-0.05, 0.05)))  # fmt: skip
+            rows.append((t_grid, acc, adc.sample_times(rate_hz, duration_s, rng=rng), adc, rng))
+        volts = _chunk_volts(rows, record, amplifier, planes)
+        for (_, _, ts, adc, rng), v, spec in zip(rows, volts, chunk, strict=True):
             noisy = v + noise_v_rms * rng.standard_normal(v.shape)
             codes = np.asarray(adc.quantise(noisy)).astype(np.int64)
             meta = {
@@ -498,8 +731,29 @@ def synthesize_runs(
                 "seed": str(seed),
                 "source": _SOURCE,
             }
-            out.append(Recording(t=ts, columns={"adc": codes}, meta=meta))
-    return out
+            if planes is None:
+                columns = {"adc": codes}
+            else:
+                columns = dict(zip(PLANE_COLUMNS, codes, strict=True))
+                meta["planes"] = "hall_a vertical, hall_b lateral"
+            yield Recording(t=ts, columns=columns, meta=meta)
+
+
+def _chunk_volts(rows, record, amplifier, planes) -> np.ndarray:
+    """Sensor voltages of a batch of runs: ``(runs, samples)`` or ``(runs, 2, samples)``."""
+    args = (
+        jnp.asarray(rows[0][0]),
+        jnp.asarray(np.stack([r[1] for r in rows])),
+        jnp.asarray(np.stack([r[2] for r in rows])),
+        jnp.asarray([r[3].conversion_time_s for r in rows]),
+        record.adc.averaging_points,
+    )
+    if planes is None:
+        return np.asarray(_sensor_chain(record.whisker(), amplified_hall(record, amplifier),
+                                        *args))  # fmt: skip
+    return np.asarray(_sensor_chain_planes(planes.whiskers(record),
+                                           planes.halls(record, amplifier),
+                                           jnp.asarray(planes.mixing()), *args))  # fmt: skip
 
 
 def speed_tag(speed_mps: float) -> str:
@@ -532,6 +786,7 @@ def synthesize_dataset(
     duration_s: float = 30.0,
     seed: int = 0,
     replace_synthetic: bool = False,
+    channels: int = 1,
 ) -> list[Path]:
     """Write a labelled dataset ``out/<terrain>/<terrain>_v<speed>_r<run>.csv`` as CSV recordings.
 
@@ -547,6 +802,11 @@ def synthesize_dataset(
         replace_synthetic: Replace the simulator's own recordings at the very paths this
             call writes (for re-running the demo); any other CSV under ``out`` is still
             refused.
+        channels: Hall sensors: 1 (column ``adc``) or 2 (``hall_a``, ``hall_b``; see
+            :func:`synthesize_runs`).
+
+    Each recording is written as soon as its batch of runs is simulated, so memory does
+    not grow with the number of runs and an interrupted call leaves whole files.
 
     Returns:
         The CSV paths, in terrain, speed, run order.
@@ -561,7 +821,7 @@ def synthesize_dataset(
     specs = [RunSpec(t, float(v), r) for t in terrains for v in speeds for r in range(runs)]
     paths = dataset_paths(out, specs)
     _check_dataset_folder(Path(out), paths if replace_synthetic else [])
-    recs = synthesize_runs(specs, record=record, duration_s=duration_s, seed=seed)
+    recs = iter_runs(specs, record=record, duration_s=duration_s, seed=seed, channels=channels)
     return [write_csv(path, rec) for path, rec in zip(paths, recs, strict=True)]
 
 

@@ -1,0 +1,148 @@
+"""The whisker's own transfer function, for features that do not depend on the whisker.
+
+A whisker turns the base motion into a signal through its resonances: the Hall sensor reads
+the relative deflection at the sensor position (modes, damping and the static correction of
+the exact model), the ADS1115 averages it over a conversion, and the host's sample rate folds
+whatever lies above Nyquist back into the band. A recording in codes is therefore, bin by bin,
+
+    X(f) = T(f) B(f),    T(f) = G M diag(H_p(f)),
+
+with ``B`` the base acceleration in each bending plane (m/s²), ``H_p`` the deflection per unit
+base acceleration of plane ``p`` times the conversion's averaging response, ``M`` the sensors'
+cross-talk and ``G`` their gains in codes per metre. :class:`WhiskerResponse` computes ``T``
+from a whisker record (and its ``[planes]`` table for two sensors) and gives two filters:
+
+* ``to_base = T⁻¹`` (regularised where the whisker hardly moves): an estimate of the base
+  motion itself, what the ground did, from which band levels in dB are read;
+* ``recolour = T_ref T⁻¹``: the window as the reference whisker (the one a model was trained
+  with) would have recorded the same base motion. With the training whisker itself this is
+  the identity, so a model trained on one whisker and run on another sees the windows it
+  knows.
+
+Aliasing is accounted for in the magnitude: above Nyquist the base spectrum is taken as flat
+across the aliases of a bin (terrain acceleration spectra vary slowly there), so the
+effective gain is ``√(Σ_m |H(f_m)|²)`` over the aliases ``f_m`` of the bin, with the phase of
+the bin's own frequency.
+"""
+
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..model import WhiskerRecord, harmonic_steady_state, load_record, observe
+from ..terrain import SensorPlanes
+
+#: Aliases of a bin summed on each side (the ADS1115's averaging nulls the rest).
+ALIASES = 4
+#: Regularisation of the inverse, relative to the largest gain: bins where the whisker's
+#: response is this far below its peak are not amplified further.
+REGULARISATION = 1e-3
+
+
+def deflection_per_acc(whisker, freqs_hz) -> np.ndarray:
+    """Complex relative deflection at the sensor per unit base acceleration (m per m/s²).
+
+    From the exact model's harmonic steady state (static correction included): the response
+    to ``y_b = sin(ω t)/ω²`` read at ``t = 0`` and a quarter period later. Compiled once
+    per number of frequencies; the whisker is traced.
+    """
+    f = jnp.maximum(jnp.asarray(freqs_hz, dtype=float), 1e-3)
+    return np.asarray(_deflection_per_acc(whisker, f))
+
+
+@eqx.filter_jit
+def _deflection_per_acc(whisker, f):
+    def one(fb):
+        w = 2 * jnp.pi * fb
+        t = jnp.stack([0.0, 0.25 / fb])
+        d = observe(whisker, harmonic_steady_state(whisker, t, fb_hz=fb, hb_m=1.0 / w**2))
+        # base acceleration −sin(ωt): phasor −1; deflection phasor d(T/4) + i d(0)
+        return -(d[1] + 1j * d[0])
+
+    return jax.vmap(one)(f)
+
+
+def averaging_response(freqs_hz, conversion_s: float, points: int) -> np.ndarray:
+    """The ADS1115's mean over a conversion ending at the sample, as a complex gain."""
+    tau = (np.arange(points) + 0.5) / points * conversion_s
+    return np.mean(np.exp(-2j * np.pi * np.outer(freqs_hz, tau)), axis=1)
+
+
+@dataclass(frozen=True)
+class WhiskerResponse:
+    """A calibrated whisker and its sensors as seen at one sample rate.
+
+    Attributes:
+        record: The whisker record (its ``[planes]`` table for two sensors).
+        amplifier: Gain of the sensors' amplifier on top of the record's Hall gain.
+        channels: 1 (sensor A, vertical plane) or 2 (A vertical, B lateral).
+    """
+
+    record: WhiskerRecord
+    amplifier: float = 1.0
+    channels: int = 1
+
+    def __post_init__(self):
+        if self.channels not in (1, 2):
+            raise ValueError(
+                f"a whisker has one or two Hall sensors; these windows have {self.channels} "
+                "channels"
+            )
+        if not (np.isfinite(self.amplifier) and self.amplifier > 0):
+            raise ValueError(f"amplifier {self.amplifier!r} must be a positive number")
+
+    def transfer(self, freqs_hz, rate_hz: float) -> np.ndarray:
+        """``T(f)`` in codes per m/s², shape ``(bins, channels, channels)`` (aliasing in the
+        magnitude, see the module docstring)."""
+        planes = SensorPlanes.from_record(self.record)
+        whiskers = planes.whiskers(self.record)[: self.channels]
+        halls = planes.halls(self.record, self.amplifier)[: self.channels]
+        adc = self.record.adc
+        f = np.asarray(freqs_hz, dtype=float)
+        # every alias of every bin in one call: row m is f + m·rate (m = −A … A), row A
+        # the bins' own frequencies
+        fm = np.abs(f[None, :] + np.arange(-ALIASES, ALIASES + 1)[:, None] * rate_hz)
+        avg = averaging_response(fm.ravel(), adc.conversion_time_s, adc.averaging_points)
+        per_plane = []
+        for w in whiskers:
+            h = (deflection_per_acc(w, fm.ravel()) * avg).reshape(fm.shape)
+            power = np.sum(np.abs(h) ** 2, axis=0)
+            per_plane.append(np.sqrt(power) * np.exp(1j * np.angle(h[ALIASES])))
+        gains = np.array([float(h.gain_v_per_m) for h in halls]) / adc.lsb_v
+        mix = planes.mixing()[: self.channels, : self.channels]
+        return (gains[:, None] * mix)[None] * np.stack(per_plane, axis=1)[:, None, :]
+
+    def to_base(self, freqs_hz, rate_hz: float) -> np.ndarray:
+        """Regularised ``T⁻¹`` (m/s² per code), shape ``(bins, channels, channels)``."""
+        t = self.transfer(freqs_hz, rate_hz)
+        lam = REGULARISATION * np.max(np.abs(t))
+        th = np.conj(np.swapaxes(t, 1, 2))
+        eye = np.eye(self.channels)[None]
+        return np.linalg.solve(th @ t + lam**2 * eye, th)
+
+    def recolour(self, reference: "WhiskerResponse", freqs_hz, rate_hz: float) -> np.ndarray:
+        """``T_ref T⁻¹``: the windows as the ``reference`` whisker would have recorded them."""
+        return reference.transfer(freqs_hz, rate_hz) @ self.to_base(freqs_hz, rate_hz)
+
+    def to_dict(self) -> dict:
+        """JSON-able form (model files): the record as TOML text, and the amplifier."""
+        return {"name": self.record.name, "toml": self.record.to_toml(),
+                "amplifier": self.amplifier}  # fmt: skip
+
+    @classmethod
+    def from_dict(cls, d: dict, channels: int) -> "WhiskerResponse":
+        """Inverse of :meth:`to_dict`.
+
+        Raises:
+            RecordError: The record in ``d`` does not load.
+        """
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "whisker.toml"
+            path.write_text(str(d["toml"]))
+            record = load_record(path)
+        return cls(record, float(d.get("amplifier", 1.0)), channels)
