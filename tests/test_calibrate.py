@@ -96,6 +96,7 @@ def test_vibrations_alone_never_report_both_EI_and_C(decay_fit):
     assert f1_rec == pytest.approx(p["f1_hz"]["value"], rel=1e-9)
 
 
+@pytest.mark.slow
 def test_material_pin_reports_C_not_EI(paper):
     rec, _, _ = paper
     obs = _pluck(rec, "deflection", gain_known=True, rate_hz=400, duration_s=2, noise_db=40,
@@ -105,6 +106,7 @@ def test_material_pin_reports_C_not_EI(paper):
     assert cal.params["C"]["value"] == pytest.approx(6.207, rel=2e-3)
 
 
+@pytest.mark.slow
 def test_static_test_pins_EI_so_C_follows(paper):
     rec, _, _ = paper
     ei = rec.structure.EI
@@ -278,6 +280,7 @@ def test_bad_observation_is_refused():
         wi.Observation(t, np.sin(t), excitation="sine")
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not DATA.exists(), reason="shared cantilever data not present")
 def test_real_cantilever_30cm():
     rec = wi.WhiskerRecord(

@@ -37,9 +37,9 @@ def _stiffer(record, factor):
 # (what goes wrong, the record the user gives, a change to the recording, checks one of which
 # must fail)
 CASES = [
-    ("wrong record: f1 three times the whisker's", lambda r: _stiffer(r, 9.0), None,
-     {"far-from-nominal", "mode-1-weak", "residual-peak", "correlated-residuals", "zeta-large",
-      "at-bound"}),
+    pytest.param("wrong record: f1 three times the whisker's", lambda r: _stiffer(r, 9.0), None,
+                 {"far-from-nominal", "mode-1-weak", "residual-peak", "correlated-residuals",
+                  "zeta-large", "at-bound"}, marks=pytest.mark.slow),
     pytest.param("a steady line the model does not have", lambda r: r, _hum,
                  {"residual-peak", "correlated-residuals"}, marks=pytest.mark.slow),
 ]  # fmt: skip

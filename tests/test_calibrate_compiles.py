@@ -54,6 +54,7 @@ def _recordings(record, fb):
     ]
 
 
+@pytest.mark.slow
 def test_calibrating_other_whiskers_compiles_nothing_new():
     cals, counts = [], []
     for length, r_w, r_c, n, x_s, fb, tip in WHISKERS:

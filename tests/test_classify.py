@@ -456,6 +456,7 @@ def test_one_compilation_per_architecture(tmp_path):
     assert compiled["_batch_proba"] <= 1 and compiled["_window_proba"] <= 1, compiled
 
 
+@pytest.mark.slow
 def test_cli_two_sensors_whisker_aware_model_on_another_calibrated_whisker(tmp_path, capsys):
     """The paper's two orthogonal sensors through synth, train (whisker-aware), evaluate
     and classify; a recording of another whisker is refused until its calibrated record is
@@ -579,6 +580,7 @@ def test_modal_fit_model_round_trip(tmp_path):
 
 
 def test_modal_fit_option_goes_with_the_fitted_features(tmp_path, capsys):
-    assert main(["train", str(tmp_path), "--out", str(tmp_path / "x"), "--features", "paper",
-                 "--modal-fit"]) == 2  # fmt: skip
+    (tmp_path / "data").mkdir()
+    assert main(["train", str(tmp_path / "data"), "--out", str(tmp_path / "x"), "--features",
+                 "paper", "--modal-fit"]) == 2  # fmt: skip
     assert "--modal-fit goes with --features fitted" in capsys.readouterr().err

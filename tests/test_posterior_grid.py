@@ -86,6 +86,7 @@ def test_grid_columns_equal_direct_columns(modes, offsets, n):
         ({"wander": 2e-3}, 1),
     ],
 )
+@pytest.mark.slow
 def test_log_prob_on_grid_equals_direct(setup, modes):
     """The batch (gridded path taken) equals the direct log-probability walker by walker;
     also with a clock wandering by 2 ms (two samples) over the recording, which only a grid

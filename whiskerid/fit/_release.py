@@ -79,7 +79,7 @@ def find_decays(t: np.ndarray, y: np.ndarray) -> list[Decay]:
     y = np.asarray(y, dtype=float)
     dt = float(np.median(np.diff(t)))
     f = dominant_frequency(t, y)
-    if f is None:
+    if f is None or not _line_stands_out(t, y, f):
         return []
     period = max(2, round(1.0 / (f * dt)))
     clipped = clipped_mask(y)
@@ -127,6 +127,21 @@ def dominant_frequency(t: np.ndarray, y: np.ndarray) -> float | None:
         shift = 0.5 * (a - c) / den if den < 0 else 0.0
         return float((i + shift) / (n * dt))
     return float(freqs[i])
+
+
+def _line_stands_out(t, y, f) -> bool:
+    """Whether the periodogram at ``f`` stands above white noise's largest bin (its bins are
+    exponential: the largest of ``N`` exceeds ``median·(ln N + 8)/ln 2`` with probability
+    about ``e⁻⁸``)."""
+    n = y.size
+    dt = float(np.median(np.diff(t)))
+    yy = np.interp(t[0] + dt * np.arange(n), t, y)
+    p = np.abs(np.fft.rfft((yy - np.mean(yy)) * np.hanning(n))) ** 2
+    freqs = np.fft.rfftfreq(n, dt)
+    i = int(np.argmin(np.abs(freqs - f)))
+    peak = float(np.max(p[max(i - 1, 1) : i + 2]))
+    floor = float(np.median(p[1:]))
+    return floor <= 0 or peak > floor * (np.log(p.size) + 8.0) / np.log(2.0)
 
 
 def clipped_mask(y: np.ndarray, *, min_run: int = 2) -> np.ndarray:
@@ -258,8 +273,8 @@ def _decay_in(t, y, clipped, active, f, anchor, lo, hi):
     # follows soon must not enter the fit of this one's frequencies)
     quiet = np.flatnonzero(~active[ta:hi])
     ring_end = ta + int(quiet[0]) if quiet.size else hi
-    tb = min(hi, ta + 20 * period, max(ring_end + period, ta + 4 * period))
-    if tb - ta < 4 * period:
+    tb = min(hi, ta + 20 * period, max(ring_end + period, ta + 4 * period, ta + 40))
+    if tb - ta < max(4 * period, 40):  # too few samples to tell a ringing from noise
         return None
     seg = slice(ta, tb)
     # seeded with the record's frequency: a stretch's own spectrum can favour a higher mode
@@ -268,7 +283,8 @@ def _decay_in(t, y, clipped, active, f, anchor, lo, hi):
     freqs, rates = np.abs(freqs[order]), rates[order]
     resid = _linear_fit(t[seg], y[seg], t[ta], freqs, rates)
     sigma = max(_robust_rms(resid), quantum(y))
-    if np.max(np.abs(y[seg] - resid - np.median(y[seg] - resid))) < 5 * sigma:
+    model = y[seg] - resid
+    if np.max(np.abs(model - np.median(model))) < 5 * sigma or np.var(model) < 3 * sigma**2:
         return None  # nothing rings above the noise
     if not abs(np.log(freqs[0] / f + 1e-300)) < np.log(1.25):
         return None  # a bend or a knock, not the whisker ringing at its frequency
