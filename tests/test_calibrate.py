@@ -135,6 +135,7 @@ def test_nonuniform_timestamps(paper):
     assert cal.params["zeta"]["value"] == pytest.approx(zeta, rel=0.05)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("hb_known", [True, pytest.param(False, marks=pytest.mark.slow)])
 def test_sine_with_known_and_unknown_amplitude(paper, hb_known):
     rec, f1, zeta = paper

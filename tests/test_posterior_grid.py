@@ -104,6 +104,7 @@ def test_log_prob_on_grid_equals_direct(setup, modes):
     np.testing.assert_allclose(lp, ref, rtol=1e-12, atol=0)
 
 
+@pytest.mark.slow
 def test_batch_falls_back_to_direct_columns():
     """One walker whose |λ| max|δ| is beyond the Taylor radius sends the whole batch down the
     direct path: its value is the direct one, where the gridded columns would be off."""
@@ -168,6 +169,7 @@ def test_packed_arguments_round_trip():
         np.testing.assert_array_equal(x, y)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("marginal", [pytest.param(True, marks=pytest.mark.slow), False])
 def test_log_prob_gradients_direct_and_gridded(marginal):
     """The log-density is differentiable on both paths, forward and reverse (NUTS needs
