@@ -15,7 +15,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, TextIO
 
-from whiskerid.io import RECORDER_KEY, Recording, read_recording
+from whiskerid.io import RECORDER_KEY, Recording, fsync_folder, read_recording
 
 from ._sampler import Sample
 
@@ -32,20 +32,6 @@ def unique_path(path: str | os.PathLike[str]) -> Path:
         n += 1
         candidate = p.with_name(f"{p.stem}-{n}{p.suffix}")
     return candidate
-
-
-def _fsync_dir(directory: Path) -> None:
-    # Make the new directory entry durable too, or a power cut could lose the whole file.
-    try:
-        fd = os.open(directory, os.O_RDONLY)
-    except OSError:  # e.g. platforms that cannot open directories
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
 
 
 class Recorder:
@@ -126,7 +112,8 @@ class Recorder:
         lines.append(",".join(header) + "\n")
         self._file.write("".join(lines))
         self.sync()
-        _fsync_dir(self.path.parent.resolve())
+        # the new directory entry too, or a power cut could lose the whole file
+        fsync_folder(self.path.parent.resolve())
 
     def write(self, t_s: float, *values: float) -> None:
         """Append one row; sync if the last sync is ``sync_interval_s`` old.
