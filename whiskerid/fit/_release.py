@@ -79,7 +79,7 @@ def find_decays(t: np.ndarray, y: np.ndarray) -> list[Decay]:
     y = np.asarray(y, dtype=float)
     dt = float(np.median(np.diff(t)))
     f = dominant_frequency(t, y)
-    if f is None or not _line_stands_out(t, y, f):
+    if f is None:
         return []
     period = max(2, round(1.0 / (f * dt)))
     clipped = clipped_mask(y)
@@ -127,21 +127,6 @@ def dominant_frequency(t: np.ndarray, y: np.ndarray) -> float | None:
         shift = 0.5 * (a - c) / den if den < 0 else 0.0
         return float((i + shift) / (n * dt))
     return float(freqs[i])
-
-
-def _line_stands_out(t, y, f) -> bool:
-    """Whether the periodogram at ``f`` stands above white noise's largest bin (its bins are
-    exponential: the largest of ``N`` exceeds ``median·(ln N + 8)/ln 2`` with probability
-    about ``e⁻⁸``)."""
-    n = y.size
-    dt = float(np.median(np.diff(t)))
-    yy = np.interp(t[0] + dt * np.arange(n), t, y)
-    p = np.abs(np.fft.rfft((yy - np.mean(yy)) * np.hanning(n))) ** 2
-    freqs = np.fft.rfftfreq(n, dt)
-    i = int(np.argmin(np.abs(freqs - f)))
-    peak = float(np.max(p[max(i - 1, 1) : i + 2]))
-    floor = float(np.median(p[1:]))
-    return floor <= 0 or peak > floor * (np.log(p.size) + 8.0) / np.log(2.0)
 
 
 def clipped_mask(y: np.ndarray, *, min_run: int = 2) -> np.ndarray:
