@@ -130,12 +130,19 @@ def dominant_frequency(t: np.ndarray, y: np.ndarray) -> float | None:
 
 
 def clipped_mask(y: np.ndarray, *, min_run: int = 2) -> np.ndarray:
-    """Samples at the record's extreme values in runs of at least ``min_run``: a converter's
-    rails. A ringing signal passes its extremes once; clipping holds them."""
+    """Samples at the record's extreme values in runs of at least ``min_run``, or at an
+    extreme met three times or more by a signal that spans many converter steps: a
+    converter's rails. A ringing signal passes its extremes once; clipping holds them (and at
+    a few samples per period, a clipped ringing meets the rail once per period)."""
     mask = np.zeros(y.size, bool)
+    q = max(quantum(y), 1e-300)
+    median = float(np.median(y))
     for extreme in (np.max(y), np.min(y)):
         at = y == extreme
         if np.count_nonzero(at) < min_run:
+            continue
+        if np.count_nonzero(at) >= 3 and abs(extreme - median) > 100 * q:
+            mask |= at
             continue
         run_start = None
         for i in range(y.size + 1):
