@@ -6,21 +6,28 @@ bent, or being struck; after the next pluck starts it is none of its business ei
 detector finds each decay from the data alone, with no whisker model, so it works for any
 whisker and sampling rate (aliased modes included):
 
-1. The dominant observed frequency ``f`` of the record (aliased or not) sets the time scale,
-   one period ``P``. A high-pass (the record minus its moving average over ``P``) and the
-   moving maximum of its magnitude give a ringing envelope; where it stands above the noise
-   are *events* (a hold does not ring, so holds are not events).
-2. For each event, a sum of one or two damped sinusoids plus an offset and a drift is fitted
-   (variable projection: frequencies and decay rates nonlinear, the rest linear) to a stretch
-   that is surely free decay: from one period after the envelope's maximum.
+1. The dominant observed frequency ``f`` of the record (aliased or not; from the spectrum of
+   the first difference, so that holds and drifts do not win) sets the time scale, one period
+   ``P``. A high-pass (the record minus its moving average over ``P``) and the moving maximum
+   of its magnitude give a ringing envelope; where it stands above the noise (or above a
+   quarter of its peak, in a record that rings throughout) the record rings. A hold does not.
+2. From the strongest ringing not yet explained, one or two damped sinusoids plus an offset
+   and a drift are fitted (variable projection: frequencies and decay rates nonlinear, the
+   rest linear) to a stretch that is surely free decay: from one period after the ringing's
+   maximum for as long as it rings (at most 20 periods, at least 40 samples). A stretch whose
+   fit does not stand clearly above its residuals, or whose line is not the record's, is not
+   a decay.
 3. The decay's start is found by walking back from there, half a period at a time and then
-   sample by sample, for as long as the model (its linear part refitted on each stretch)
-   explains the data to within a few times the stretch's residual scale: before a release
-   the signal stops following the decaying oscillation extrapolated backwards (a held
-   whisker does not oscillate, a struck one was at rest). Its end is found walking forward
-   the same way (the next pluck's bending departs from the rest level).
-4. Samples clipped at the converter's rails (runs of the extreme value) are left out: the
-   decay starts after the last clipped sample.
+   sample by sample, for as long as the model fitted on what is already accepted *predicts*
+   the data to within a few residual scales plus a tenth of the oscillation: before a
+   release the signal stops following the decaying oscillation extrapolated backwards (a
+   held whisker does not oscillate, a struck one was at rest). Its end is found walking
+   forward the same way, the rates fitted again each time the stretch doubles (the next
+   pluck's bending departs from the prediction). The rest of the record is searched again,
+   so every pluck in a file is found.
+4. Samples clipped at the converter's rails (runs of the extreme value, or an extreme met
+   three times by a signal spanning many converter steps) are left out: the decay starts
+   after the last clipped sample.
 
 A recording that starts after the release gives a decay starting at its first sample.
 """
