@@ -49,11 +49,10 @@ from .._version import __version__
 from ..model import UniformBeam, WhiskerRecord
 from ._checks import LAG1_MAX, check_fit, hac_covariance, no_smaller_than, residual_peak
 from ._checks import lag1 as lag1_autocorr
-from ._lsq import scaled_inverse_gram
+from ._lsq import gradient_cosine_from, residual_variance, scaled_inverse_gram
 from ._observation import CalibrationError, Observation, StaticTest, sha256_of
 from ._problem import (
     FitProblem,
-    gradient_cosine,
     reported_names,
     reported_with_jacobian,
     residuals_and_jacobian,
@@ -193,14 +192,15 @@ def calibrate(
     # the blocks are then combined fairly and s² ≈ 1 (a reduced χ²).
     problem = problem.reweighted(problem.unflatten(res.value))
     res = solve(problem, problem.unflatten(res.value), solver=solver, max_steps=max_steps)
+    # One Jacobian at the optimum serves the covariance, the gradient test and the HAC below.
     resid_w, jac = (np.asarray(a) for a in residuals_and_jacobian(problem, res.value))
     bread = np.asarray(scaled_inverse_gram(jac))
-    s2 = float(np.sum(resid_w**2) / max(resid_w.size - res.value.size, 1))
+    s2 = float(residual_variance(resid_w, res.value.size))
     cov = s2 * bread
     # The solver's own test (steps below rtol 1e-10 of every parameter) can stall at
     # rounding level on long real recordings (timestamps rounded to 1 µs: the same optimum,
     # 400 steps); MINPACK's gradient test says whether the point is stationary anyway.
-    gcos = float(gradient_cosine(problem, res.value))
+    gcos = float(gradient_cosine_from(jac, resid_w))
     converged = bool(res.ok) or gcos < GTOL
     ok = converged and bool(np.all(np.isfinite(np.diag(cov))))
     status = "ok" if ok else ("non-finite" if not np.isfinite(float(res.cost)) else "not converged")

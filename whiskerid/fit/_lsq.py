@@ -101,9 +101,13 @@ def covariance(fn, y, args=None) -> tuple[jax.Array, jax.Array]:
     """
     r = fn(y, args)
     jac = jax.jacfwd(lambda p: fn(p, args))(y)
-    n, p = r.size, y.size
-    s2 = jnp.sum(r**2) / max(n - p, 1)
+    s2 = residual_variance(r, y.size)
     return s2 * scaled_inverse_gram(jac), s2
+
+
+def residual_variance(r, n_params: int):
+    """``s² = ‖r‖²/(n − p)``: the residual variance left after fitting ``n_params``."""
+    return (r**2).sum() / max(r.size - n_params, 1)
 
 
 def scaled_inverse_gram(jac: jax.Array) -> jax.Array:
@@ -122,7 +126,11 @@ def gradient_cosine(fn, y, args=None) -> jax.Array:
     vector and a column of the Jacobian (0 at a stationary point, whatever the scales of
     the parameters and residuals); ``y`` must be a flat 1-D array."""
     r = fn(y, args)
-    jac = jax.jacfwd(lambda p: fn(p, args))(y)
+    return gradient_cosine_from(jax.jacfwd(lambda p: fn(p, args))(y), r)
+
+
+def gradient_cosine_from(jac: jax.Array, r: jax.Array) -> jax.Array:
+    """:func:`gradient_cosine` from the Jacobian ``(n, p)`` and the residuals ``(n,)``."""
     norms = jnp.linalg.norm(jac, axis=0) * jnp.linalg.norm(r)
     return jnp.max(jnp.abs(jac.T @ r) / jnp.maximum(norms, jnp.finfo(r.dtype).tiny))
 
