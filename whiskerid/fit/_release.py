@@ -199,21 +199,24 @@ def _columns(t, t0, freqs, rates):
     return np.stack(cols, axis=1)
 
 
-def _linear_fit(t, y, t0, freqs, rates):
-    """Residuals of the decay model with its linear part fitted to ``(t, y)``."""
+def _coefficients(t, y, t0, freqs, rates):
+    """The decay model's columns at ``t`` and its linear part fitted to ``(t, y)``."""
     a = _columns(t, t0, freqs, rates)
     scale = np.maximum(np.linalg.norm(a, axis=0), 1e-300)
     coef, *_ = np.linalg.lstsq(a / scale, y, rcond=None)
-    return y - (a / scale) @ coef
+    return a, coef / scale
+
+
+def _linear_fit(t, y, t0, freqs, rates):
+    """Residuals of the decay model with its linear part fitted to ``(t, y)``."""
+    a, coef = _coefficients(t, y, t0, freqs, rates)
+    return y - a @ coef
 
 
 def _predict(t, y, fit, at, t0, freqs, rates):
     """The decay model fitted on indices ``fit`` (a slice), predicting indices ``at``:
     returns the misfit there and the oscillation's RMS amplitude there."""
-    a = _columns(t[fit], t0, freqs, rates)
-    scale = np.maximum(np.linalg.norm(a, axis=0), 1e-300)
-    coef, *_ = np.linalg.lstsq(a / scale, y[fit], rcond=None)
-    coef = coef / scale
+    _, coef = _coefficients(t[fit], y[fit], t0, freqs, rates)
     b = _columns(t[at], t0, freqs, rates)
     misfit = y[at] - b @ coef
     oscillation = b[:, 2:] @ coef[2:]
