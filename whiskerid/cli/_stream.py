@@ -213,10 +213,12 @@ def run(args) -> dict:
 
 def _use_compile_cache(option: str | None) -> None:
     """Point JAX's persistent compilation cache at the folder (before anything compiles)."""
-    if option is not None and option.lower() == "none":
-        return
-    folder = Path(option) if option else cache_dir()
-    if folder is None:  # switched off in the environment
+    folder = None if option is not None and option.lower() == "none" else (
+        Path(option) if option else cache_dir())  # fmt: skip
+    if folder is None:  # off, here or in the environment; the command line may have set it
+        import jax
+
+        jax.config.update("jax_enable_compilation_cache", False)
         return
     try:
         folder.mkdir(parents=True, exist_ok=True)

@@ -35,7 +35,6 @@ A recording that starts after the release gives a decay starting at its first sa
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares as _scipy_lsq
 
 #: Residual scales (robust RMS of the tail fit) within which a stretch is "still the decay".
 TOLERANCE = 4.0
@@ -226,6 +225,10 @@ def _predict(t, y, fit, at, t0, freqs, rates):
 def _fit_tail(t, y, f0, *, t0=None, start=None):
     """Frequencies and decay rates of one or two damped sinusoids fitted to ``(t, y)``
     (from ``start = (freqs, rates)`` when given, else from ``f0`` and the spectrum)."""
+    # Imported here: scipy.optimize takes longer to import than the rest of the fit
+    # package, and the stream and classifier import this package without detecting plucks.
+    from scipy.optimize import least_squares as _scipy_lsq
+
     t0 = t[0] if t0 is None else t0
     span = t[-1] - t[0]
     if start is not None:
