@@ -165,8 +165,17 @@ class OnlineClassifier:
         v = self.speed(t_s) if callable(self.speed) else self.speed
         return None if v is None or not np.isfinite(v) else float(v)
 
-    def warm_up(self) -> None:
-        """Compile the model's path once, so that the first window's latency is honest."""
+    def warm_up(self, saved_programs: str | Path | None = None) -> None:
+        """Compile the model's path once, so that the first window's latency is honest.
+
+        Args:
+            saved_programs: A folder for the model's traced program
+                (``ClassifierModel.use_saved_program``): a restart loads it instead of
+                tracing again. Best the folder of JAX's persistent compilation cache, so
+                that the compiled code is loaded too.
+        """
+        if saved_programs is not None and hasattr(self.model, "use_saved_program"):
+            self.model.use_saved_program(saved_programs)
         self.model.window_proba(np.zeros(self.model.window), self.speed_at(0.0))
 
     def push(self, t_s: float, value: float) -> WindowLabel | None:

@@ -392,4 +392,31 @@ def test_a_restart_reuses_the_compile_cache(tiny_model, tmp_path):
         times.append(time.perf_counter() - t0)
         assert done.returncode == 0, done.stderr
     assert any(f.is_file() for f in cache.rglob("*"))
+    assert len(list(cache.glob("window-proba-*.jaxexport"))) == 1  # the traced program too
     assert times[1] < times[0]
+    # 'none' switches the cache off, even where the environment names one.
+    elsewhere = tmp_path / "env-cache"
+    env = {**os.environ, "WHISKERID_COMPILE_CACHE": str(elsewhere)}
+    done = subprocess.run([*argv[:-1], "none"], capture_output=True, text=True, timeout=300,
+                          env=env)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert not any(f.is_file() for f in elsewhere.rglob("*"))
+
+
+def test_a_saved_program_labels_as_the_traced_one(tiny_model, tmp_path):
+    """use_saved_program saves the traced window function, a new instance loads it, and
+    the probabilities are the traced ones; other numbers never pick up that program."""
+    x = 3000 * np.sin(2 * np.pi * 31 * np.arange(200) / 200) + _noise(np.arange(200), 300)
+    traced = wi.ClassifierModel.load(tiny_model)
+    p0 = traced.window_proba(x, 0.2)
+    saving = wi.ClassifierModel.load(tiny_model)
+    assert saving.use_saved_program(tmp_path) is False  # nothing there yet: saved now
+    assert len(list(tmp_path.glob("*.jaxexport"))) == 1
+    loading = wi.ClassifierModel.load(tiny_model)
+    assert loading.use_saved_program(tmp_path) is True
+    for m in (saving, loading):
+        np.testing.assert_allclose(m.window_proba(x, 0.2), p0, atol=1e-6)
+    other = wi.ClassifierModel(traced.spec, traced.labels, traced.mean, 2 * traced.std,
+                               list(traced.nets), hop=traced.hop)  # fmt: skip
+    assert other.use_saved_program(tmp_path) is False  # its own program, not the first's
+    assert len(list(tmp_path.glob("*.jaxexport"))) == 2

@@ -16,7 +16,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..fit import find_peaks
 from ..io import RecordingError, read_recording
 from ._dataset import list_dataset, recording_rate, recording_signal, recording_speed, windows_of
 
@@ -43,6 +42,8 @@ MIN_SEPARATION_HZ = 2.0
 
 def _peaks(freqs, amps, n):
     keep = freqs >= 2 * freqs[1]  # below two bins: the slow drift of a recording
+    from ..fit import find_peaks  # here: importing classify (the stream) skips the fit package
+
     return find_peaks(freqs[keep], amps[keep], n=n,
                       min_separation_hz=max(MIN_SEPARATION_HZ, 2 * freqs[1]),
                       min_relative=1e-3)  # fmt: skip

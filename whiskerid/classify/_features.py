@@ -53,7 +53,6 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._choices import FEATURE_KINDS
-from ..fit import fit_windows, least_squares, to_interval
 
 FeatureKind = Literal["fitted", "paper"]
 _EPS = 1e-12
@@ -316,6 +315,8 @@ def spectral_peaks(amps: Float[Array, " bins"], df: float, n: int = 3):
 
 
 def _resonance(params, freqs):
+    from ..fit import to_interval  # here: a loaded model's restart need not import fit
+
     u_f, u_z, log_a2, log_c, f_lo, f_hi = params
     fn = to_interval(u_f, f_lo, f_hi)
     zeta = to_interval(u_z, 0.005, 0.5)
@@ -344,6 +345,8 @@ def fit_resonance(freqs: Float[Array, " bins"], power: Float[Array, " bins"], f0
     def residual(y, args):
         model, _, _ = _resonance((*y, f_lo, f_hi), freqs)
         return jnp.log(model + 1e-6) - target
+
+    from ..fit import least_squares  # imported when traced, not by a restarted stream
 
     fit = least_squares(residual, y0, max_steps=48)
     _, fn, zeta = _resonance((*fit.value, f_lo, f_hi), freqs)
@@ -630,6 +633,8 @@ def window_fit_features(spec: FeatureSpec, windows) -> np.ndarray:
     n = windows.shape[0]
     if not (spec.kind == "fitted" and spec.window_fit) or n == 0:
         return np.zeros((n, 0 if not spec.window_fit else spec.channels * N_WINDOW_FIT))
+    from ..fit import fit_windows  # the fit package loads only for models that use it
+
     flat = windows.reshape(-1, spec.window)
     fits = fit_windows(flat, rate_hz=spec.rate_hz)
     ok = np.asarray(fits.ok)

@@ -25,7 +25,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optax
 from jaxtyping import Array, Float, Int
 
 PAPER_HIDDEN = (256, 128, 64, 32, 16)
@@ -202,11 +201,15 @@ class _Settings(NamedTuple):
 def _optimizer(settings: _Settings):
     """AdamW with the (traced) step size and weight decay; its state does not depend on
     them, so one built from any numbers initialises it."""
+    import optax  # training only: a model that only predicts (the stream) never loads it
+
     return optax.adamw(settings.learning_rate, weight_decay=settings.weight_decay)
 
 
 def _loss(model, x, y, weights, smoothing=0.0):
     """Weighted mean cross-entropy; ``weights`` is per row (0 leaves a row out)."""
+    import optax
+
     logits = jax.vmap(model)(x)
     target = optax.smooth_labels(jax.nn.one_hot(y, logits.shape[-1], dtype=logits.dtype), smoothing)
     ce = optax.softmax_cross_entropy(logits, target)

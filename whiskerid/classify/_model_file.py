@@ -19,6 +19,7 @@ and any NumPy (a Pi without JAX, another language) can read a model.
 """
 
 import functools
+import hashlib
 import json
 import zipfile
 from pathlib import Path
@@ -28,8 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._version import __version__
-from ..fit import sha256_of
-from ..io import Recording, RecordingError, atomic_folder
+from ..io import Recording, RecordingError, atomic_folder, atomic_write, sha256_of
 from ._context import check_context, fuse_context
 from ._dataset import (
     check_rate,
@@ -41,7 +41,13 @@ from ._dataset import (
     signal_column,
     windows_of,
 )
-from ._features import FeatureSpec, batch_features, window_features, window_fit_features
+from ._features import (
+    N_WINDOW_FIT,
+    FeatureSpec,
+    batch_features,
+    window_features,
+    window_fit_features,
+)
 from ._mlp import (
     MLP,
     from_arrays,
@@ -120,6 +126,7 @@ class ClassifierModel:
         self._structure = spec.structure()
         self._args = (spec.numbers(whisker), self.nets, jnp.asarray(self.mean),
                       jnp.asarray(self.std))  # fmt: skip
+        self._exported = None  # window_proba from a saved program (see use_saved_program)
 
     @property
     def needs_whisker(self) -> bool:
@@ -137,6 +144,7 @@ class ClassifierModel:
         whisker = WhiskerResponse(whisker.record, whisker.amplifier, self.spec.channels)
         self.recorded_with = whisker
         self._args = (self.spec.numbers(whisker, self.whisker), *self._args[1:])
+        self._exported = None
 
     @property
     def channels(self) -> tuple[str, ...] | None:
@@ -241,7 +249,58 @@ class ClassifierModel:
             check_speed(speed)
         v = np.float64(np.nan if speed is None else speed)
         extra = window_fit_features(self.spec, x[None])[0] if self.spec.window_fit else _NONE
+        if self._exported is not None:
+            return _finite(np.asarray(self._exported(x, v, extra)))
         return _finite(np.asarray(_window_proba(self._structure, *self._args, x, v, extra)))
+
+    def use_saved_program(self, folder: str | Path) -> bool:
+        """Run :meth:`window_proba` from a program saved in ``folder``, saving it first if
+        it is not there; a restarted process then skips tracing the features and networks.
+
+        The program (:mod:`jax.export`, StableHLO with this model's numbers as constants)
+        is keyed by those numbers, the feature structure and the JAX version, so another
+        model, whisker or JAX never picks it up. Together with JAX's persistent compilation
+        cache in the same folder, a restart loads instead of tracing and compiling.
+
+        Returns:
+            True when the program was loaded from ``folder``, False when it was saved now
+            (or could not be: an unwritable folder only costs the saving).
+        """
+        folder = Path(folder)
+        path = folder / f"window-proba-{self._program_key()}.jaxexport"
+        try:
+            exported = jax.export.deserialize(bytearray(path.read_bytes()))
+            loaded = True
+        except (OSError, ValueError):  # absent or unreadable: trace it once more and save
+            x = jax.ShapeDtypeStruct(self.spec.window_shape, jnp.float64)
+            v = jax.ShapeDtypeStruct((), jnp.float64)
+            extra = jax.ShapeDtypeStruct(
+                (self.spec.channels * N_WINDOW_FIT,) if self.spec.window_fit else (0,),
+                jnp.float64,
+            )
+            fn = functools.partial(_window_proba, self._structure, *self._args)
+            exported = jax.export.export(jax.jit(fn))(x, v, extra)
+            loaded = False
+            try:
+                folder.mkdir(parents=True, exist_ok=True)
+                atomic_write(path, bytes(exported.serialize()))
+            except OSError:
+                pass
+        self._exported = jax.jit(exported.call)
+        return loaded
+
+    def _program_key(self) -> str:
+        """Hash of everything the compiled window function depends on."""
+        h = hashlib.sha256()
+        for part in (jax.__version__, jax.lib.__version__, repr(self._structure),
+                     str(jax.tree.structure(self._args)), self.spec.window_shape,
+                     self.spec.window_fit):  # fmt: skip
+            h.update(repr(part).encode())
+        for leaf in jax.tree.leaves(self._args):
+            a = np.asarray(leaf)
+            h.update(f"{a.dtype}{a.shape}".encode())
+            h.update(a.tobytes())
+        return h.hexdigest()[:32]
 
     def classify_recording(self, rec: Recording, *, speed: float | None = None) -> dict:
         """Labels of every window of a recording, and one for the whole (mean probability).

@@ -101,7 +101,8 @@ def add_parser(sub) -> None:
     p.add_argument(
         "--compile-cache",
         metavar="DIR",
-        help=f"JAX's persistent compilation cache: a restart reuses the compiled model "
+        help=f"JAX's persistent compilation cache, which also keeps the model's traced "
+        f"program: a restart reuses both instead of tracing and compiling again "
         f"(default ${CACHE_ENV}, else ~/.cache/whiskerid/jax; 'none' turns it off)",
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the simulated terrain")
@@ -130,7 +131,7 @@ def run(args) -> dict:
         labels_to = args.labels_to and hw.parse_endpoint(args.labels_to, "--labels-to")
     except ValueError as e:
         raise CommandError(str(e)) from None
-    _use_compile_cache(args.compile_cache)
+    cache = _use_compile_cache(args.compile_cache)
     model = _load_model(args)
     clock = hw.FakeClock() if args.fast else None
     timing = {} if clock is None else {"clock": clock.now_ns, "sleep": clock.sleep}
@@ -162,7 +163,7 @@ def run(args) -> dict:
     quiet = args.stopped_below * lsb if args.stopped_below > 0 else None
     online = hw.OnlineClassifier(model, hop_s=args.hop, speed_mps=speed, limits=limits,
                                  quiet_std=quiet)  # fmt: skip
-    online.warm_up()  # compile (or load from the cache) before the first sample
+    online.warm_up(cache)  # compile (or load from the cache) before the first sample
     sink = None if labels_to is None else hw.LabelSink(labels_to)
     summary = hw.StreamSummary()
 
@@ -211,15 +212,16 @@ def run(args) -> dict:
     return out
 
 
-def _use_compile_cache(option: str | None) -> None:
-    """Point JAX's persistent compilation cache at the folder (before anything compiles)."""
+def _use_compile_cache(option: str | None) -> Path | None:
+    """Point JAX's persistent compilation cache at the folder (before anything compiles);
+    returns the folder, or None when the cache is off."""
     folder = None if option is not None and option.lower() == "none" else (
         Path(option) if option else cache_dir())  # fmt: skip
     if folder is None:  # off, here or in the environment; the command line may have set it
         import jax
 
         jax.config.update("jax_enable_compilation_cache", False)
-        return
+        return None
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as e:
@@ -231,6 +233,7 @@ def _use_compile_cache(option: str | None) -> None:
     # The stream's functions are small: cache them all, however quick they were to compile.
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    return folder
 
 
 def _load_model(args):

@@ -10,6 +10,7 @@ covariance.
 """
 
 from .. import _jax_setup as _jax_setup
+from ..io import sha256_of as sha256_of  # where fit's users found it before
 from ._calibrate import GTOL as GTOL
 from ._calibrate import Calibration as Calibration
 from ._calibrate import calibrate as calibrate
@@ -32,7 +33,6 @@ from ._observation import observation_from_recording as observation_from_recordi
 from ._observation import observations_from_recording as observations_from_recording
 from ._observation import read_static_test as read_static_test
 from ._observation import release_time as release_time
-from ._observation import sha256_of as sha256_of
 from ._problem import ZETA_MAX as ZETA_MAX
 from ._problem import FitProblem as FitProblem
 from ._problem import RecordingModel as RecordingModel

@@ -46,11 +46,12 @@ import numpy as np
 
 from .._choices import PINS
 from .._version import __version__
+from ..io import sha256_of
 from ..model import UniformBeam, WhiskerRecord
 from ._checks import LAG1_MAX, check_fit, hac_covariance, no_smaller_than, residual_peak
 from ._checks import lag1 as lag1_autocorr
 from ._lsq import gradient_cosine_from, residual_variance, scaled_inverse_gram
-from ._observation import CalibrationError, Observation, StaticTest, sha256_of
+from ._observation import CalibrationError, Observation, StaticTest
 from ._problem import (
     FitProblem,
     reported_names,

@@ -1,7 +1,6 @@
 """What a calibration fits: recordings (:class:`Observation`), static tests, and the reading
 of both from files (:func:`observation_from_recording`, :func:`read_static_test`)."""
 
-import hashlib
 from dataclasses import dataclass
 from dataclasses import replace as _replace
 from pathlib import Path
@@ -145,15 +144,6 @@ def read_static_test(path: str | Path) -> StaticTest:
         x_m=None if x is None else float(x[0]),
         source=str(path),
     )
-
-
-def sha256_of(path: str | Path) -> str:
-    """SHA-256 of a file's bytes (provenance in the calibration record)."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def nominal_gain(record: WhiskerRecord, observable: str) -> float:

@@ -20,4 +20,5 @@ from ._recording import check_samples as check_samples
 from ._recording import read_csv_table as read_csv_table
 from ._recording import read_recording as read_recording
 from ._recording import same_file as same_file
+from ._recording import sha256_of as sha256_of
 from ._recording import write_csv as write_csv

@@ -22,6 +22,7 @@ anywhere before the end is still an error.
 """
 
 import csv
+import hashlib
 import io
 import warnings
 import zipfile
@@ -481,3 +482,12 @@ def check_samples(t: np.ndarray, x: np.ndarray, *, where: str = "recording", min
             f"{where}: {kind} timestamp at row {bad[0] + 1} "
             f"(t = {float(t[bad[0] + 1])!r}); timestamps must increase"
         )
+
+
+def sha256_of(path: str | Path) -> str:
+    """SHA-256 of a file's bytes (the provenance of calibration records and model files)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
