@@ -110,29 +110,65 @@ def find_decays(t: np.ndarray, y: np.ndarray) -> list[Decay]:
 
 
 def dominant_frequency(t: np.ndarray, y: np.ndarray) -> float | None:
-    """Frequency (Hz) of the largest spectral peak away from DC, interpolated; None if flat."""
+    """Frequency (Hz) of the largest spectral peak away from DC, interpolated; None if flat.
+
+    The spectrum is that of the first difference, which weights a line by its frequency: a
+    hold, a bend or a drift puts most of its power at low frequencies, where it would
+    otherwise beat the ringing. The difference also lifts white noise towards Nyquist, and
+    a short, strongly damped decay in a long quiet record spreads its energy thinly over
+    the whole record's spectrum: when no peak of the whole record stands clear of the
+    noise's expected level, shorter and shorter stretches are tried (halves, quarters, ...)
+    and the clearest peak among them is taken.
+    """
     n = y.size
     if n < 16 or not (np.all(np.isfinite(y)) and np.all(np.isfinite(t))):
         return None
     dt = float(np.median(np.diff(t)))
-    yy = np.interp(t[0] + dt * np.arange(n), t, y)  # uniform grid for the FFT
-    # The first difference weights a line by its frequency: a hold, a bend or a drift puts
-    # most of its power at low frequencies, where it would otherwise beat the ringing.
-    yy = np.diff(yy)
-    n = yy.size
-    spec = np.abs(np.fft.rfft((yy - np.mean(yy)) * np.hanning(n)))
-    freqs = np.fft.rfftfreq(n, dt)
+    d = np.diff(np.interp(t[0] + dt * np.arange(n), t, y))  # uniform grid for the FFT
+    # white noise of σ has a first difference of √2 σ: its level from the median, so that
+    # the ringing (however long) does not count as noise
+    sigma = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / np.sqrt(2.0)
     low = max(3.0 / (n * dt), 1.0)  # below: drift and holds, not ringing
+    f, snr = _clearest_peak(d, dt, sigma, low)
+    if f is None:
+        return None
+    m = d.size // 2
+    while snr < _CLEAR and m >= 64:
+        for a in range(0, d.size - m + 1, m // 2):
+            fs, ss = _clearest_peak(d[a : a + m], dt, sigma, low)
+            if fs is not None and ss >= _CLEAR and ss > snr:
+                f, snr = fs, ss
+        m //= 2
+    return f
+
+
+#: A spectral peak this many times the noise's expected amplitude is a line, not noise.
+_CLEAR = 5.0
+
+
+def _clearest_peak(d, dt, sigma, low):
+    """The largest peak of the windowed spectrum of ``d`` (a first difference) above
+    ``low`` Hz, interpolated, and its ratio to white noise's expected level there; the
+    largest *clear* peak (ratio ≥ 5) if the largest is not. ``(None, 0)`` if flat."""
+    n = d.size
+    window = np.hanning(n)
+    spec = np.abs(np.fft.rfft((d - np.mean(d)) * window))
+    freqs = np.fft.rfftfreq(n, dt)
     spec[freqs < low] = 0.0
+    floor = sigma * np.sqrt(2.0 * np.sum(window**2)) * np.abs(np.sin(np.pi * freqs * dt))
+    ratio = spec / np.maximum(floor, 1e-300)
     i = int(np.argmax(spec))
     if spec[i] <= 0:
-        return None
+        return None, 0.0
+    clear = ratio >= _CLEAR
+    if not clear[i] and np.any(clear):
+        i = int(np.argmax(np.where(clear, spec, 0.0)))
+    shift = 0.0
     if 0 < i < spec.size - 1:
         a, b, c = np.log(spec[i - 1 : i + 2] + 1e-300)
         den = a - 2 * b + c
         shift = 0.5 * (a - c) / den if den < 0 else 0.0
-        return float((i + shift) / (n * dt))
-    return float(freqs[i])
+    return float((i + shift) / (n * dt)), float(ratio[i])
 
 
 def clipped_mask(y: np.ndarray, *, min_run: int = 2) -> np.ndarray:
@@ -142,11 +178,12 @@ def clipped_mask(y: np.ndarray, *, min_run: int = 2) -> np.ndarray:
     a few samples per period, a clipped ringing meets the rail once per period)."""
     mask = np.zeros(y.size, bool)
     q = max(quantum(y), 1e-300)
-    median = float(np.median(y))
     for extreme in (np.max(y), np.min(y)):
         at = y == extreme
-        if np.count_nonzero(at) < min_run:
+        if np.count_nonzero(at) < min_run or np.all(at):
             continue
+        # the level of the rest of the record (a long hold at the rail is most of it)
+        median = float(np.median(y[~at]))
         if np.count_nonzero(at) >= 3 and abs(extreme - median) > 100 * q:
             mask |= at
             continue
