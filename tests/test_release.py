@@ -62,6 +62,32 @@ def test_decays_start_at_the_release(kind, n, rate, tip, offset, fsr):
         assert d.frequency_hz == pytest.approx(46.0, rel=0.05)
 
 
+def test_a_short_strongly_damped_decay_in_a_long_quiet_record_is_found():
+    """Five cycles of ringing (ζ = 0.13) then 1.5 s of noise: the whole record's spectrum
+    holds the decay's broad line below the noise lifted by the first difference."""
+    rec = _record(f1_factor=0.9, zeta=0.13, rate_hz=475.0)
+    f1 = float(rec.whisker().natural_frequencies_hz[0])
+    r, _ = simulate_pluck(rec, kind="late", rate_hz=475.0, late_s=0.008, duration_s=1.6,
+                          noise_db=35.0, seed=7)  # fmt: skip
+    decays = find_decays(r.t, r.signal().astype(float))
+    assert len(decays) == 1 and decays[0].from_start
+    assert decays[0].frequency_hz == pytest.approx(f1 * np.sqrt(1 - 0.13**2), rel=0.05)
+
+
+def test_clips_after_a_hold_at_the_rail_are_left_out():
+    """Held at the rail (most of the record there), released at 200 Hz: the first cycles
+    touch the rail once per period each, and the decay starts after the last of them."""
+    rec = _record(f1_factor=1.65, zeta=0.03, rate_hz=200.0, offset_v=2.04, fsr_v=2.048)
+    r, truth = simulate_pluck(rec, kind="held", rate_hz=200.0, hold_s=0.9, release_s=1.3,
+                              tip_deflection_m=1.5e-3, duration_s=1.8, seed=5)  # fmt: skip
+    y = r.signal().astype(float)
+    (d,) = find_decays(r.t, y)
+    rail = y == y.max()
+    assert np.count_nonzero(rail & (r.t > truth.releases_s[0])) >= 2  # the case in question
+    assert d.start_s > r.t[rail].max()
+    assert not np.any(rail[(r.t >= d.start_s) & (r.t <= d.end_s)])
+
+
 def test_quiet_record_has_no_decay():
     rng = np.random.default_rng(0)
     t = np.arange(2000) / 860.0

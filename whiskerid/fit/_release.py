@@ -36,6 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._signal import _interpolate
+
 #: Residual scales (robust RMS of the tail fit) within which a stretch is "still the decay".
 TOLERANCE = 4.0
 
@@ -116,9 +118,10 @@ def dominant_frequency(t: np.ndarray, y: np.ndarray) -> float | None:
     hold, a bend or a drift puts most of its power at low frequencies, where it would
     otherwise beat the ringing. The difference also lifts white noise towards Nyquist, and
     a short, strongly damped decay in a long quiet record spreads its energy thinly over
-    the whole record's spectrum: when no peak of the whole record stands clear of the
-    noise's expected level, shorter and shorter stretches are tried (halves, quarters, ...)
-    and the clearest peak among them is taken.
+    the whole record's spectrum. So the record and its halves, quarters, ... (down to 64
+    samples) are searched, and the peak that stands clearest above white noise's expected
+    level (from the record's own noise) wins; where none stands clear, the whole record's
+    largest.
     """
     n = y.size
     if n < 16 or not (np.all(np.isfinite(y)) and np.all(np.isfinite(t))):
@@ -128,47 +131,51 @@ def dominant_frequency(t: np.ndarray, y: np.ndarray) -> float | None:
     # white noise of σ has a first difference of √2 σ: its level from the median, so that
     # the ringing (however long) does not count as noise
     sigma = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / np.sqrt(2.0)
-    low = max(3.0 / (n * dt), 1.0)  # below: drift and holds, not ringing
-    f, snr = _clearest_peak(d, dt, sigma, low)
-    if f is None:
+    # never below a converter's rounding (a quiet stretch can sit on one code)
+    sigma = max(sigma, 2.0 * quantum(y) / np.sqrt(12.0))
+    (f,), (snr,) = _clearest_peaks(d[None], dt, sigma)
+    if not np.isfinite(f):
         return None
     m = d.size // 2
-    while snr < _CLEAR and m >= 64:
-        for a in range(0, d.size - m + 1, m // 2):
-            fs, ss = _clearest_peak(d[a : a + m], dt, sigma, low)
-            if fs is not None and ss >= _CLEAR and ss > snr:
-                f, snr = fs, ss
+    while m >= 64:
+        # padded by half a stretch: a decay at the record's very start (or end) is then in
+        # the middle of one stretch, not under the window's taper
+        stretches = np.lib.stride_tricks.sliding_window_view(np.pad(d, m // 2), m)[:: m // 2]
+        fs, ss = _clearest_peaks(stretches, dt, sigma)
+        k = int(np.argmax(ss))
+        if ss[k] >= _CLEAR and ss[k] > snr:
+            f, snr = fs[k], ss[k]
         m //= 2
-    return f
+    return float(f)
 
 
 #: A spectral peak this many times the noise's expected amplitude is a line, not noise.
 _CLEAR = 5.0
 
 
-def _clearest_peak(d, dt, sigma, low):
-    """The largest peak of the windowed spectrum of ``d`` (a first difference) above
-    ``low`` Hz, interpolated, and its ratio to white noise's expected level there; the
-    largest *clear* peak (ratio ≥ 5) if the largest is not. ``(None, 0)`` if flat."""
-    n = d.size
+def _clearest_peaks(d, dt, sigma):
+    """For each row of ``d`` (stretches of a first difference): the largest peak of its
+    windowed spectrum, interpolated, and its ratio to white noise's expected level there;
+    the largest *clear* peak (ratio ≥ 5) if the largest is not. NaN and 0 for a flat row."""
+    rows, n = d.shape
     window = np.hanning(n)
-    spec = np.abs(np.fft.rfft((d - np.mean(d)) * window))
+    spec = np.abs(np.fft.rfft((d - d.mean(axis=1, keepdims=True)) * window, axis=1))
     freqs = np.fft.rfftfreq(n, dt)
-    spec[freqs < low] = 0.0
+    spec[:, freqs < max(3.0 / (n * dt), 1.0)] = 0.0  # below: drift and holds, not ringing
     floor = sigma * np.sqrt(2.0 * np.sum(window**2)) * np.abs(np.sin(np.pi * freqs * dt))
     ratio = spec / np.maximum(floor, 1e-300)
-    i = int(np.argmax(spec))
-    if spec[i] <= 0:
-        return None, 0.0
     clear = ratio >= _CLEAR
-    if not clear[i] and np.any(clear):
-        i = int(np.argmax(np.where(clear, spec, 0.0)))
-    shift = 0.0
-    if 0 < i < spec.size - 1:
-        a, b, c = np.log(spec[i - 1 : i + 2] + 1e-300)
-        den = a - 2 * b + c
-        shift = 0.5 * (a - c) / den if den < 0 else 0.0
-    return float((i + shift) / (n * dt)), float(ratio[i])
+    top = np.argmax(spec, axis=1)
+    top_clear = np.argmax(np.where(clear, spec, 0.0), axis=1)
+    r = np.arange(rows)
+    i = np.where(~clear[r, top] & clear.any(axis=1), top_clear, top)
+    f = np.full(rows, np.nan)
+    snr = np.zeros(rows)
+    for j in np.flatnonzero(spec[r, i] > 0):
+        k = i[j]
+        f[j] = (_interpolate(spec[j], k)[0] if 0 < k < spec.shape[1] - 1 else k) / (n * dt)
+        snr[j] = ratio[j, k]
+    return f, snr
 
 
 def clipped_mask(y: np.ndarray, *, min_run: int = 2) -> np.ndarray:
