@@ -118,10 +118,11 @@ def dominant_frequency(t: np.ndarray, y: np.ndarray) -> float | None:
     hold, a bend or a drift puts most of its power at low frequencies, where it would
     otherwise beat the ringing. The difference also lifts white noise towards Nyquist, and
     a short, strongly damped decay in a long quiet record spreads its energy thinly over
-    the whole record's spectrum. So the record and its halves, quarters, ... (down to 64
-    samples) are searched, and the peak that stands clearest above white noise's expected
-    level (from the record's own noise) wins; where none stands clear, the whole record's
-    largest.
+    the whole record's spectrum. So when the whole record's largest peak does not stand
+    clear of white noise's expected level (from the record's own noise), its halves,
+    quarters, ... (down to 64 samples) are searched, and the peak that stands clearest there
+    wins; where none does, the whole record's largest. (Only then: in a short stretch a
+    bend or a release step can stand out as a low "line" that is not a ringing.)
     """
     n = y.size
     if n < 16 or not (np.all(np.isfinite(y)) and np.all(np.isfinite(t))):
@@ -133,13 +134,13 @@ def dominant_frequency(t: np.ndarray, y: np.ndarray) -> float | None:
     sigma = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / np.sqrt(2.0)
     # never below a converter's rounding (a quiet stretch can sit on one code)
     sigma = max(sigma, 2.0 * quantum(y) / np.sqrt(12.0))
-    (f,), (snr,) = _clearest_peaks(d[None], dt, sigma)
+    # padded by half its length on each side: a decay at the record's very start (or end)
+    # is then not under the window's taper
+    (f,), (snr,) = _clearest_peaks(np.pad(d, d.size // 2)[None], dt, sigma, d.size * dt)
     if not np.isfinite(f):
         return None
     m = d.size // 2
-    while m >= 64:
-        # padded by half a stretch: a decay at the record's very start (or end) is then in
-        # the middle of one stretch, not under the window's taper
+    while snr < _CLEAR and m >= 64:
         stretches = np.lib.stride_tricks.sliding_window_view(np.pad(d, m // 2), m)[:: m // 2]
         fs, ss = _clearest_peaks(stretches, dt, sigma)
         k = int(np.argmax(ss))
@@ -153,15 +154,17 @@ def dominant_frequency(t: np.ndarray, y: np.ndarray) -> float | None:
 _CLEAR = 5.0
 
 
-def _clearest_peaks(d, dt, sigma):
+def _clearest_peaks(d, dt, sigma, span_s=None):
     """For each row of ``d`` (stretches of a first difference): the largest peak of its
     windowed spectrum, interpolated, and its ratio to white noise's expected level there;
-    the largest *clear* peak (ratio ≥ 5) if the largest is not. NaN and 0 for a flat row."""
+    the largest *clear* peak (ratio ≥ 5) if the largest is not. NaN and 0 for a flat row.
+    ``span_s``: the signal's own length in a zero-padded row (the row's length if None)."""
     rows, n = d.shape
     window = np.hanning(n)
     spec = np.abs(np.fft.rfft((d - d.mean(axis=1, keepdims=True)) * window, axis=1))
     freqs = np.fft.rfftfreq(n, dt)
-    spec[:, freqs < max(3.0 / (n * dt), 1.0)] = 0.0  # below: drift and holds, not ringing
+    span_s = n * dt if span_s is None else span_s
+    spec[:, freqs < max(3.0 / span_s, 1.0)] = 0.0  # below: drift and holds, not ringing
     floor = sigma * np.sqrt(2.0 * np.sum(window**2)) * np.abs(np.sin(np.pi * freqs * dt))
     ratio = spec / np.maximum(floor, 1e-300)
     clear = ratio >= _CLEAR
