@@ -416,6 +416,12 @@ def test_a_saved_program_labels_as_the_traced_one(tiny_model, tmp_path):
     assert loading.use_saved_program(tmp_path) is True
     for m in (saving, loading):
         np.testing.assert_allclose(m.window_proba(x, 0.2), p0, atol=1e-6)
+    (saved,) = tmp_path.glob("*.jaxexport")
+    saved.write_bytes(b"torn")  # a damaged cache file is traced and saved again
+    again = wi.ClassifierModel.load(tiny_model)
+    assert again.use_saved_program(tmp_path) is False
+    np.testing.assert_allclose(again.window_proba(x, 0.2), p0, atol=1e-6)
+    assert wi.ClassifierModel.load(tiny_model).use_saved_program(tmp_path) is True
     other = wi.ClassifierModel(traced.spec, traced.labels, traced.mean, 2 * traced.std,
                                list(traced.nets), hop=traced.hop)  # fmt: skip
     assert other.use_saved_program(tmp_path) is False  # its own program, not the first's

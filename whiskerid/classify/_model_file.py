@@ -271,7 +271,9 @@ class ClassifierModel:
         try:
             exported = jax.export.deserialize(bytearray(path.read_bytes()))
             loaded = True
-        except (OSError, ValueError):  # absent or unreadable: trace it once more and save
+        # Absent, torn or from an incompatible writer: the file is only a cache of ours,
+        # so whatever reading it raises, the program is traced once more and saved again.
+        except Exception:
             x = jax.ShapeDtypeStruct(self.spec.window_shape, jnp.float64)
             v = jax.ShapeDtypeStruct((), jnp.float64)
             extra = jax.ShapeDtypeStruct(
@@ -284,7 +286,7 @@ class ClassifierModel:
             try:
                 folder.mkdir(parents=True, exist_ok=True)
                 atomic_write(path, bytes(exported.serialize()))
-            except OSError:
+            except (OSError, ImportError):  # read-only folder, or no flatbuffers to write
                 pass
         self._exported = jax.jit(exported.call)
         return loaded
