@@ -3,6 +3,7 @@
 import itertools
 from dataclasses import replace
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -227,6 +228,49 @@ def test_recolouring_makes_another_whisker_look_like_the_training_one():
     assert raw_gap > 4 and fixed_gap < 1.5, (raw_gap, fixed_gap)
     np.testing.assert_allclose(np.asarray(through_filter(xa[None], same))[0], xa - xa.mean(),
                                atol=2e-3 * np.std(xa))  # fmt: skip
+
+
+def test_floor_match_narrows_the_noise_floors_of_whiskers_to_one():
+    """The ADC's white noise alone, recorded by the paper whisker, by one with f_1 × 0.7
+    (whose response above 60 Hz is 7-14 dB weaker) and by one with f_1 × 1.3 (stronger
+    there): recoloured to the paper whisker, the weak one's floor stands far above the
+    paper's at 80-95 Hz; with the floor matched the gap shrinks by more than half, the
+    strong one reads the paper's level, and the same window always gets the same noise."""
+    from dataclasses import replace as dc_replace
+
+    from whiskerid.classify._features import matched_noise, through_filter
+
+    paper = wi.paper_record()
+
+    def scaled(factor):
+        g = paper.structure.shear_modulus_pa * factor**2
+        return wi.WhiskerResponse(
+            paper.replace(structure=dc_replace(paper.structure, shear_modulus_pa=g)), 20.0
+        )
+
+    ref, weak, strong = wi.WhiskerResponse(paper, 20.0), scaled(0.7), scaled(1.3)
+    x = jnp.asarray(2.0 * np.random.default_rng(0).standard_normal((48, 1, 200)))
+    spec = wi.FeatureSpec(deconvolve=True, floor_match=True)
+    f = np.fft.rfftfreq(200, 1 / 200)
+    band = (f > 80) & (f < 95)
+
+    def level(resp, matched):
+        num = spec.numbers(resp, ref)
+
+        def one(w):
+            y = through_filter(w, num.recolour)
+            return y + matched_noise(w, num.dither) if matched else y
+
+        y = np.asarray(jax.vmap(one)(x))[:, 0]
+        p = np.abs(np.fft.rfft((y - y.mean(1, keepdims=True)) * np.hanning(200))) ** 2
+        return 10 * np.log10(np.mean(p[:, band]))
+
+    plain_gap = level(weak, False) - level(ref, False)
+    assert plain_gap > 8
+    assert level(weak, True) - level(ref, True) < plain_gap / 2
+    assert abs(level(strong, True) - level(ref, True)) < 1.5
+    num = spec.numbers(weak, ref)
+    np.testing.assert_array_equal(matched_noise(x[0], num.dither), matched_noise(x[0], num.dither))
 
 
 def test_cross_channel_features_read_the_motion_ellipse():

@@ -139,3 +139,41 @@ def test_lateral_plane_has_its_own_frequency():
     np.testing.assert_allclose(vert.natural_frequencies_hz,
                                rec.whisker().natural_frequencies_hz)  # fmt: skip
     assert float(lat.zeta[0]) == 0.07 and float(vert.zeta[0]) == 0.04
+
+
+@pytest.mark.slow
+def test_two_sensor_pluck_calibrates_each_plane(tmp_path):
+    """simulate --channels 2 plucks both planes of an asymmetric whisker; calibrate with both
+    columns recovers each plane's f1 and zeta, the vertical at the top level and the lateral
+    in [planes], without being given either."""
+    from whiskerid.cli import main
+    from whiskerid.terrain import SensorPlanes
+
+    true = _planes_record(lateral_frequency_ratio=1.08, lateral_zeta=0.05).replace(zeta=0.03)
+    whisker, pluck, out = (true.save(tmp_path / "w.toml"), tmp_path / "p.csv",
+                           tmp_path / "cal.toml")  # fmt: skip
+    assert main(["simulate", "--whisker", str(whisker), "--channels", "2", "--excitation",
+                 "decay", "--observable", "adc", "--duration", "2", "--noise-db", "30",
+                 "--out", str(pluck)]) == 0  # fmt: skip
+    rec = wi.read_recording(pluck)
+    assert list(rec.columns) == ["hall_a", "hall_b"]
+    nominal = wi.paper_record().save(tmp_path / "nominal.toml")
+    assert main(["calibrate", str(pluck), "--whisker", str(nominal), "--signal-col",
+                 "hall_a,hall_b", "--out", str(out)]) == 0  # fmt: skip
+    cal = wi.load_record(out)
+    planes = SensorPlanes.from_record(cal)
+    f1 = float(cal.whisker().natural_frequencies_hz[0])
+    assert abs(f1 / float(true.whisker().natural_frequencies_hz[0]) - 1) < 0.005
+    assert abs(float(np.ravel(cal.zeta)[0]) - 0.03) < 0.002
+    assert abs(planes.lateral_frequency_ratio - 1.08) < 0.005
+    assert abs(float(planes.lateral_zeta) - 0.05) < 0.003
+    assert cal.extra["fit"]["options"]["signal_col"] == "hall_a"
+
+
+def test_two_sensor_simulation_refuses_what_it_cannot_record(tmp_path):
+    from whiskerid.cli import main
+
+    out = str(tmp_path / "x.csv")
+    assert main(["simulate", "--channels", "2", "--observable", "deflection", "--out", out]) == 2
+    assert main(["simulate", "--channels", "2", "--model", "paper", "--out", out,
+                 "--observable", "adc"]) == 2  # fmt: skip

@@ -89,6 +89,14 @@ class FeatureSpec:
             time domain (:func:`whiskerid.fit.fit_windows`, all windows at once): its damped
             frequency (over Nyquist), ζ, log amplitude over the window's RMS and the fit's
             ``ok`` flag (fitted). Computed on the host, next to the compiled features.
+        floor_match: With ``deconvolve``: raise every window's noise floor, recoloured to
+            the reference whisker, to the level the average whisker of a span around the
+            reference would give it (:meth:`WhiskerResponse.floor_gain`), by adding noise
+            shaped to make up the difference (seeded by the window's content, so the
+            features stay a function of the window). A recording of another whisker,
+            recoloured, has its floor (ADC noise, quantisation, the error of timestamp
+            jitter) raised wherever it responds more weakly than the reference; with the
+            floor matched, training and use see the same floor.
     """
 
     kind: FeatureKind = "fitted"
@@ -106,6 +114,7 @@ class FeatureSpec:
     deconvolve: bool = False
     cross_channel: bool = False
     window_fit: bool = False
+    floor_match: bool = False
 
     def __post_init__(self):
         if self.kind not in FEATURE_KINDS:
@@ -123,6 +132,8 @@ class FeatureSpec:
         if self.deconvolve and self.channels > 2:
             raise ValueError("whisker-aware features take one or two Hall sensors, "
                              f"not {self.channels} channels")  # fmt: skip
+        if self.floor_match and not self.deconvolve:
+            raise ValueError("floor_match needs whisker-aware features (deconvolve)")
         if self.cross_channel and self.channels != 2:
             raise ValueError("cross-channel features need exactly two channels")
 
@@ -197,7 +208,7 @@ class FeatureSpec:
         plain = [jnp.asarray(v, dtype=jnp.float64) for v in values]
         if not self.deconvolve:
             empty = jnp.zeros((0,), dtype=jnp.complex128)
-            return Numbers(*plain, empty, empty)
+            return Numbers(*plain, empty, empty, jnp.zeros((0,)))
         if whisker is None:
             raise ValueError(
                 "whisker-aware features need the whisker that recorded the windows (a "
@@ -206,8 +217,13 @@ class FeatureSpec:
         reference = whisker if reference is None else reference
         padded = np.fft.rfftfreq(2 * n, 1.0 / self.rate_hz)
         recolour = whisker.recolour(reference, padded, self.rate_hz)
-        base = whisker.to_base(padded, self.rate_hz)
-        return Numbers(*plain, jnp.asarray(recolour), jnp.asarray(base))
+        if not self.floor_match:
+            base = whisker.to_base(padded, self.rate_hz)
+            return Numbers(*plain, jnp.asarray(recolour), jnp.asarray(base), jnp.zeros((0,)))
+        # the base motion is read from the recoloured window, floor matched
+        base = reference.to_base(padded, self.rate_hz)
+        dither = whisker.dither(reference, padded, self.rate_hz)
+        return Numbers(*plain, jnp.asarray(recolour), jnp.asarray(base), jnp.asarray(dither))
 
 
 class Numbers(NamedTuple):
@@ -222,6 +238,7 @@ class Numbers(NamedTuple):
     spatial_hi: Float[Array, ""]
     recolour: Array  # (bins of a 2×window FFT, channels, channels), complex; empty if unused
     to_base: Array  # the same shape: codes to base acceleration (m/s²)
+    dither: Array  # (bins of a 2×window FFT, channels): floor-matching noise; empty if unused
 
 
 #: Window-fit features per channel: damped frequency, ζ, log amplitude, ok.
@@ -540,6 +557,38 @@ def base_band_levels(base, rate_hz, edges) -> jax.Array:
     return 10 * jnp.log10(power @ inside.T.astype(power.dtype) + 1e-20)
 
 
+#: Percentile of a window's own power spectrum taken as its noise floor: most bins of a
+#: whisker's window hold the resonance, the texture or the drivetrain; the quietest fifth
+#: holds little but the floor.
+FLOOR_PERCENTILE = 20.0
+
+
+def noise_floor(xs) -> jax.Array:
+    """Per channel, the noise floor of windows ``(channels, n)`` as a per-sample variance
+    (codes²): the :data:`FLOOR_PERCENTILE` th percentile of the Hann-windowed power
+    spectrum (bins 1 … n/2, normalised so that white noise reads its variance), divided by
+    that percentile of the exponential distribution a noise bin's power follows, so that
+    white noise reads its variance."""
+    n = xs.shape[-1]
+    w = jnp.hanning(n)
+    x = xs - jnp.mean(xs, axis=-1, keepdims=True)
+    power = jnp.abs(jnp.fft.rfft(x * w, axis=-1)) ** 2 / jnp.sum(w**2)
+    quantile = -np.log1p(-FLOOR_PERCENTILE / 100)
+    return jnp.percentile(power[:, 1:], FLOOR_PERCENTILE, axis=-1) / quantile
+
+
+def matched_noise(xs, dither) -> jax.Array:
+    """Noise that lifts the floor of windows ``(channels, n)`` by ``dither²`` times their
+    own floor (:func:`noise_floor`), shaped per bin of a ``2n``-point FFT. Seeded by the
+    window's content: the same window always gets the same noise."""
+    n = xs.shape[-1]
+    seed = jax.lax.bitcast_convert_type(jnp.sum(xs).astype(jnp.float32), jnp.uint32)
+    key = jax.random.fold_in(jax.random.PRNGKey(0), seed)
+    white = jax.random.normal(key, (xs.shape[0], 2 * n), dtype=xs.dtype)
+    shaped = jnp.fft.irfft(jnp.fft.rfft(white, axis=-1) * dither.T, 2 * n, axis=-1)[:, :n]
+    return shaped * jnp.sqrt(noise_floor(xs))[:, None]
+
+
 def _cross_features(a, b):
     """Coherence in four equal bands (Welch within the window), the motion ellipse and the
     log power ratio of two zero-mean channels."""
@@ -569,9 +618,12 @@ def _cross_features(a, b):
 def _whisker_features(spec: FeatureSpec, x, speed_mps, num: Numbers):
     """Features with the whisker divided out and/or across channels (see the spec)."""
     xs = x if x.ndim == 2 else x[None]
-    plain = replace(spec, deconvolve=False, cross_channel=False, channels=1)
+    plain = replace(spec, deconvolve=False, floor_match=False, cross_channel=False, channels=1)
     base = None
-    if spec.deconvolve:
+    if spec.deconvolve and spec.floor_match:
+        xs = through_filter(xs, num.recolour) + matched_noise(xs, num.dither)
+        base = through_filter(xs, num.to_base)
+    elif spec.deconvolve:
         xs = through_filter(xs, num.recolour)
         base = through_filter(x if x.ndim == 2 else x[None], num.to_base)
     if spec.kind == "paper":

@@ -30,7 +30,7 @@ def default_spec(
     channels = ws.windows.shape[1] if ws.windows.ndim == 3 else 1
     if features == "paper":
         return FeatureSpec(kind="paper", rate_hz=ws.rate_hz, window=window, channels=channels,
-                           deconvolve=whisker)  # fmt: skip
+                           deconvolve=whisker, floor_match=whisker)  # fmt: skip
     use = ws.has_speed if use_speed is None else use_speed
     if use and not ws.has_speed:
         raise ValueError("speed features need speed_mps on every recording")
@@ -38,7 +38,7 @@ def default_spec(
     # how fast a run went as about the ground (BorealTC, runs held out: 1-4 points worse
     # with them; the synthetic set, where the speed is known: 1 point better).
     spec = FeatureSpec(kind="fitted", rate_hz=ws.rate_hz, window=window, octave_bands=use,
-                       use_speed=use, channels=channels, deconvolve=whisker,
+                       use_speed=use, channels=channels, deconvolve=whisker, floor_match=whisker,
                        cross_channel=channels == 2, window_fit=window_fit)  # fmt: skip
     if use:
         df, nyq = ws.rate_hz / window, ws.rate_hz / 2

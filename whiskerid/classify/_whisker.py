@@ -26,7 +26,7 @@ the bin's own frequency.
 """
 
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import equinox as eqx
@@ -39,6 +39,10 @@ from ..terrain import SensorPlanes
 
 #: Aliases of a bin summed on each side (the ADS1115's averaging nulls the rest).
 ALIASES = 4
+#: Whiskers a model with a matched noise floor serves: first natural frequency within these
+#: factors of the training whisker's, damping within these factors of its ζ.
+F1_SPAN = (0.6, 1.6)
+ZETA_SPAN = (0.5, 2.0)
 #: Regularisation of the inverse, relative to the largest gain: bins where the whisker's
 #: response is this far below its peak are not amplified further.
 REGULARISATION = 1e-3
@@ -124,6 +128,56 @@ class WhiskerResponse:
         th = np.conj(np.swapaxes(t, 1, 2))
         eye = np.eye(self.channels)[None]
         return np.linalg.solve(th @ t + lam**2 * eye, th)
+
+    def scaled(self, f1_factor: float, zeta_factor: float) -> "WhiskerResponse":
+        """This whisker with its natural frequencies times ``f1_factor`` (stiffness times
+        its square) and its damping times ``zeta_factor``, in both planes."""
+        rec = self.record
+        s = rec.structure
+        k = f1_factor**2
+        stiffer = (replace(s, shear_modulus_pa=s.shear_modulus_pa * k) if s.kind == "coil"
+                   else replace(s, youngs_modulus_pa=s.youngs_modulus_pa * k))  # fmt: skip
+        zeta = np.minimum(np.asarray(rec.zeta, dtype=float) * zeta_factor, 0.9)
+        planes = SensorPlanes.from_record(rec)
+        extra = dict(rec.extra)
+        if planes.lateral_zeta is not None:
+            lat = np.minimum(np.asarray(planes.lateral_zeta, dtype=float) * zeta_factor, 0.9)
+            extra["planes"] = {**planes.to_table(), "lateral_zeta": lat.tolist()}
+        zeta_v = float(zeta) if zeta.ndim == 0 else tuple(float(z) for z in zeta)
+        return WhiskerResponse(rec.replace(structure=stiffer, zeta=zeta_v, extra=extra),
+                               self.amplifier, self.channels)  # fmt: skip
+
+    def floor_gain(self, freqs_hz, rate_hz: float) -> np.ndarray:
+        """``G(f)``: per channel, how far the whiskers of a span around this one
+        (:data:`F1_SPAN` × :data:`ZETA_SPAN`, a 9 × 3 grid) fall below it on average,
+        ``√(mean |T_self / T_other|²)`` (at least 1), shape ``(bins, channels)``.
+
+        Recoloured to this whisker, a recording of a weaker one has its noise floor (ADC
+        noise, quantisation, the error of timestamp jitter) raised by ``|T_self/T_other|``;
+        a model that sees every window with its floor raised to ``G`` times its own sees
+        one floor for every whisker up to the span's average, and a floor not far below
+        that of a weaker one. (Raising it to the span's weakest drowned too much of what
+        the windows hold: every whisker, the training one included, did worse.)
+        """
+        own = np.abs(np.diagonal(self.transfer(freqs_hz, rate_hz), axis1=1, axis2=2))
+        ratios = []
+        for f1 in np.geomspace(*F1_SPAN, 9):
+            for z in (ZETA_SPAN[0], 1.0, ZETA_SPAN[1]):
+                other = self.scaled(float(f1), z).transfer(freqs_hz, rate_hz)
+                ratio = own / np.maximum(np.abs(np.diagonal(other, axis1=1, axis2=2)), 1e-300)
+                ratios.append(ratio**2)
+        return np.sqrt(np.maximum(np.mean(ratios, axis=0), 1.0))
+
+    def dither(self, reference: "WhiskerResponse", freqs_hz, rate_hz: float) -> np.ndarray:
+        """Shape of the noise that brings this whisker's floor, recoloured to
+        ``reference``, up to ``reference``'s matched floor: ``√(max(G² − g², 0))`` with
+        ``g = |T_ref / T_self|`` and ``G`` :meth:`floor_gain` of the reference, per bin
+        and channel (times the window's own floor, see the features)."""
+        t_ref = np.abs(np.diagonal(reference.transfer(freqs_hz, rate_hz), axis1=1, axis2=2))
+        t_own = np.abs(np.diagonal(self.transfer(freqs_hz, rate_hz), axis1=1, axis2=2))
+        g = t_ref / np.maximum(t_own, 1e-300)
+        big = reference.floor_gain(freqs_hz, rate_hz)
+        return np.sqrt(np.maximum(big**2 - g**2, 0.0))
 
     def recolour(self, reference: "WhiskerResponse", freqs_hz, rate_hz: float) -> np.ndarray:
         """``T_ref T⁻¹``: the windows as the ``reference`` whisker would have recorded them."""

@@ -72,7 +72,12 @@ def add_data_options(p: argparse.ArgumentParser) -> None:
         help="what the signal is; auto: from the column name or the units metadata",
     )
     p.add_argument("--time-col", default="t", help="time column (s)")
-    p.add_argument("--signal-col", help="signal column (the first non-base column by default)")
+    p.add_argument(
+        "--signal-col",
+        help="signal column (the first non-base column by default); calibrate: two columns "
+        "'hall_a,hall_b' fit the two Hall sensors' bending planes each on its own and write "
+        "the second one's into the record's [planes] table",
+    )
     p.add_argument(
         "--scale", type=float, default=1.0, help="multiply the signal by this (e.g. 9.80665 for g)"
     )
@@ -180,6 +185,9 @@ def _cmd_calibrate(args, command_error, parser) -> dict:
     check_outputs({"--out": args.out, "--plot": args.plot}, inputs, force=args.force)
     check_data_options(args)
     record = load_record(args.whisker)
+    columns = _plane_columns(args.signal_col, command_error)
+    if columns is not None:
+        return _calibrate_planes(args, parser, record, columns, command_error)
     obs = [o for p in args.recordings for o in load_observations(p, record, args)]
     static = read_static_test(args.static) if args.static else None
     cal = calibrate(
@@ -218,3 +226,98 @@ def _with_options(record, args, parser):
     if fit is None or not options:
         return record
     return record.replace(extra={**record.extra, "fit": {**fit, "options": options}})
+
+
+def _plane_columns(signal_col: str | None, command_error) -> tuple[str, str] | None:
+    """The two columns of ``--signal-col A,B`` (two Hall sensors), or None for one."""
+    if signal_col is None or "," not in signal_col:
+        return None
+    cols = tuple(c.strip() for c in signal_col.split(","))
+    if len(cols) != 2 or not all(cols) or cols[0] == cols[1]:
+        raise command_error(
+            f"--signal-col {signal_col!r}: give one column, or two distinct ones (the vertical "
+            "plane's sensor first, e.g. hall_a,hall_b)"
+        )
+    return cols
+
+
+def _calibrate_planes(args, parser, record, columns, command_error) -> dict:
+    """Both bending planes: each sensor's recordings fitted on their own (plane A from the
+    record, plane B from the record's lateral plane); the record written is plane A's fit
+    (its top-level values: f1 and zeta of the vertical plane) with the lateral plane's
+    frequency ratio and zeta in its ``[planes]`` table and plane B's fit in ``[fit.lateral]``."""
+    import sys
+    from argparse import Namespace
+
+    import numpy as np
+
+    from ..fit import calibrate
+    from ..terrain import SensorPlanes, plane_records
+
+    if args.static:
+        raise command_error(
+            "--static fixes EI of one plane: calibrate the two planes without it, "
+            "or one column at a time"
+        )
+    try:
+        planes = SensorPlanes.from_record(record)
+    except ValueError as err:
+        raise command_error(f"{args.whisker}: {err}") from None
+    starts = plane_records(record)
+    cals = []
+    for col, start in zip(columns, starts, strict=True):
+        one = Namespace(**{**vars(args), "signal_col": col})
+        obs = [o for p in args.recordings for o in load_observations(p, start, one)]
+        cal = calibrate(
+            start,
+            obs,
+            n_modes=args.modes,
+            zeta_per_mode=args.zeta_per_mode,
+            pin=args.pin,
+            solver=args.solver,
+            f1_start_hz=args.f1_start,
+        )
+        print(f"--- plane of {col}", file=sys.stderr)
+        print(cal.report(), file=sys.stderr)
+        cals.append(cal)
+    a, b = (c.record.whisker() for c in cals)
+    ratio = float(np.sqrt(float(b.EI) / float(a.EI)))
+    zeta_b = cals[1].record.zeta
+    table = {
+        **planes.to_table(),
+        "lateral_frequency_ratio": ratio,
+        "lateral_zeta": list(zeta_b) if isinstance(zeta_b, tuple) else float(zeta_b),
+    }
+    SensorPlanes.from_record(record.replace(extra={"planes": table}))  # range checks
+    first = _with_options(
+        cals[0].record, Namespace(**{**vars(args), "signal_col": columns[0]}), parser
+    )
+    extra = dict(first.extra)
+    if "fit" in extra:
+        extra["fit"] = {
+            **extra["fit"],
+            "lateral": {**cals[1].record.extra.get("fit", {}), "signal_col": columns[1]},
+        }
+    first.replace(extra={**extra, "planes": table}).save(args.out)
+    print(
+        f"wrote {args.out} (plane of {columns[0]} at the top level, {columns[1]} in [planes])",
+        file=sys.stderr,
+    )
+    out = {
+        **cals[0].to_json(),
+        "out": str(args.out),
+        "planes": {
+            col: {
+                "f1_hz": float(w.natural_frequencies_hz[0]),
+                "zeta": float(np.ravel(c.record.zeta)[0]),
+                "status": c.status,
+                "params": c.to_json()["params"],
+            }
+            for col, c, w in zip(columns, cals, (a, b), strict=True)
+        },
+        "lateral_frequency_ratio": ratio,
+    }
+    for col, c in zip(columns, cals, strict=True):
+        if c.status != "ok":
+            print(f"plane of {col}: status {c.status}: see the warnings above", file=sys.stderr)
+    return out

@@ -52,7 +52,25 @@ def add_parser(sub) -> None:
     )
     p.add_argument(
         "--base-col",
-        help="column of --base holding the acceleration (the first signal column by default)",
+        help="column of --base holding the acceleration (the first signal column by "
+        "default); with --channels 2, two columns 'VERTICAL,LATERAL' give each plane its own",
+    )
+    p.add_argument(
+        "--channels",
+        type=int,
+        choices=(1, 2),
+        default=1,
+        help="Hall sensors: 1 (one column, the observable's name) or 2 (the two orthogonal "
+        "sensors, columns hall_a for the vertical plane and hall_b for the lateral one; "
+        "--model exact, --observable voltage or adc; the lateral plane and sensor B from "
+        "the record's [planes] table)",
+    )
+    p.add_argument(
+        "--angle",
+        type=float,
+        default=45.0,
+        help="with --channels 2: direction of the pluck, the sine or a one-column --base "
+        "from the vertical plane (degrees; 0 vertical only, 90 lateral only)",
     )
     p.add_argument("--rate", type=float, default=200.0, help="sampling rate (Hz)")
     p.add_argument("--duration", type=float, default=10.0, help="length (s)")
@@ -86,6 +104,8 @@ def run(args) -> dict:
     check_outputs({"--out": args.out, "--plot": args.plot},
                   {"--whisker": args.whisker, "--base": args.base}, force=args.force)  # fmt: skip
     record = record_or_paper(args.whisker)
+    if args.channels == 2:
+        return _run_planes(args, record)
     base = None
     if args.excitation == "base":
         if args.base is None:
@@ -130,6 +150,83 @@ def run(args) -> dict:
         )
         summary["plot"] = str(args.plot)
         say(f"wrote {args.plot}")
+    return summary
+
+
+def _run_planes(args, record) -> dict:
+    """``--channels 2``: both Hall sensors (see :func:`whiskerid.terrain.simulate_planes`)."""
+    import numpy as np
+
+    from ..io import write_csv
+    from ..terrain import PLANE_OBSERVABLES, simulate_planes
+
+    if args.model != "exact":
+        raise CommandError(
+            f"--channels 2 simulates the exact modal model: drop --model {args.model}"
+        )
+    if args.observable not in PLANE_OBSERVABLES:
+        raise CommandError(
+            f"--channels 2 records the two Hall sensors: give --observable "
+            f"{' or '.join(PLANE_OBSERVABLES)}, not {args.observable}"
+        )
+    base = lateral = None
+    if args.excitation == "base":
+        if args.base is None:
+            raise CommandError("--excitation base needs --base FILE (time and base acceleration)")
+        cols = (args.base_col or "").split(",") if args.base_col else [None]
+        if len(cols) > 2:
+            raise CommandError(
+                f"--base-col {args.base_col!r}: give one column or two (VERTICAL,LATERAL)"
+            )
+        base = _read_base_motion(args.base, cols[0])
+        lateral = _read_base_motion(args.base, cols[1]) if len(cols) == 2 else None
+    try:
+        sim = simulate_planes(
+            record,
+            excitation=args.excitation,
+            observable=args.observable,
+            angle_deg=args.angle,
+            tip_deflection_m=args.tip_deflection,
+            fb_hz=args.fb,
+            hb_m=args.hb,
+            base=base,
+            lateral_base=lateral,
+            rate_hz=args.rate,
+            duration_s=args.duration,
+            noise_db=args.noise_db,
+            jitter_s=args.jitter,
+            seed=args.seed,
+        )
+    except ValueError as err:
+        raise CommandError(str(err)) from None
+    write_csv(args.out, sim)
+    say(
+        f"wrote {args.out} ({sim.t.size} samples of {args.observable}, columns "
+        f"{', '.join(sim.columns)})"
+    )
+    summary = {
+        "out": str(args.out),
+        "samples": int(sim.t.size),
+        "observable": args.observable,
+        "units": UNITS[args.observable],
+        "channels": list(sim.columns),
+        "min": {c: float(np.min(x)) for c, x in sim.columns.items()},
+        "max": {c: float(np.max(x)) for c, x in sim.columns.items()},
+        "dominant_peaks_hz": {c: _peaks(sim.t, x) for c, x in sim.columns.items()},
+    }
+    if args.plot:
+        from ..plot import plot_signal_and_spectrum
+
+        col = next(iter(sim.columns))
+        plot_signal_and_spectrum(
+            args.plot,
+            sim.t,
+            sim.columns[col],
+            label=f"{col} ({UNITS[args.observable]})",
+            title=f"{record.name}: two sensors, {args.excitation}",
+        )
+        summary["plot"] = str(args.plot)
+        say(f"wrote {args.plot} (sensor {col})")
     return summary
 
 

@@ -1,6 +1,10 @@
 """The terrain simulator: profiles, wheels, drivetrain, and the whisker's response to them."""
 
 from .. import _jax_setup as _jax_setup
+from ._planes import PLANE_EXCITATIONS as PLANE_EXCITATIONS
+from ._planes import PLANE_OBSERVABLES as PLANE_OBSERVABLES
+from ._planes import plane_records as plane_records
+from ._planes import simulate_planes as simulate_planes
 from ._terrain import AMPLIFIER as AMPLIFIER
 from ._terrain import LATERAL_MODEL as LATERAL_MODEL
 from ._terrain import MIN_DATASET_DURATION_S as MIN_DATASET_DURATION_S

@@ -383,6 +383,17 @@ with its own phase). Why this model: it uses only what the paper states of the r
 mounted on a platform above it) and the profiles already simulated, and it makes the two
 planes partly coherent (the drivetrain, the vertical level) and partly independent (roll
 and skid), as two orthogonal sensors on one whisker are.
+
+What this means for telling terrains apart: the lateral plane sees the terrain only
+through the difference of the two tracks. Their roughness and bumps are drawn from one
+spectrum per run, so the roll has the spectral shape of the heave's roughness (about six
+times its power), and the skid only follows the vertical level: a second look at what the
+vertical plane already shows, less its shared texture (joints, ripples, striations), which
+rolls nothing. The two planes are nearly incoherent (the heave is the tracks' sum, the roll
+their difference). Nothing in this model gives the lateral plane a terrain property the
+vertical one lacks (no side slip that depends on the ground, no lateral texture); a
+classifier gains from the second sensor only what a second, noisier view of the same
+run's roughness is worth.
 """
 TRACK_M = 0.10  # wheel centre to centre across a 130 mm wide robot on 30 mm wheels
 MOUNT_HEIGHT_M = 0.12  # whisker base above the wheel hubs (m)
