@@ -29,6 +29,7 @@ import json
 import os
 import platform
 import random
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -132,6 +133,7 @@ def cantilever(data: Path, work: Path) -> dict:
     from whiskerid.fleet import FleetSettings, calibrate_fleet, check_fleet
 
     root = work / "cantilever"
+    shutil.rmtree(root, ignore_errors=True)
     for length in ("30cm", "50cm"):
         w = root / f"beam-{length}"
         w.mkdir(parents=True)
@@ -189,11 +191,16 @@ def main() -> None:
     ap.add_argument("--ray", help="pass --ray to fleet calibrate (e.g. local)")
     ap.add_argument("--cantilever", type=Path, help="the cantilever data folder (real repeats)")
     ap.add_argument("--no-sim", action="store_true", help="only the real data")
+    ap.add_argument("--keep", type=Path,
+                    help="work in this folder and keep it (the cantilever's fits are then "
+                    "reused by a later run; the simulated fleet is always made anew)")  # fmt: skip
     args = ap.parse_args()
     out = {"python": platform.python_version(), "cpu": platform.processor() or platform.machine(),
            "cores": os.cpu_count()}  # fmt: skip
     with tempfile.TemporaryDirectory(prefix="whiskerid-fleet-bench-") as tmp:
-        work = Path(tmp)
+        work = Path(tmp) if args.keep is None else args.keep
+        for name in ("root", "out", "loop"):
+            shutil.rmtree(work / name, ignore_errors=True)
         env = {**os.environ, "WHISKERID_COMPILE_CACHE": str(work / "jax-cache")}
         if not args.no_sim:
             out["simulated"] = simulated(args, work, env)

@@ -208,9 +208,14 @@ def test_a_bad_layout_says_what_was_found_and_expected(tmp_path, damage, message
 
 def test_cli_writes_the_table_flags_and_plots(fleet, tmp_path, capsys):
     root, out = _copy(fleet, tmp_path)
+    (out / "whisker-002" / "session-01.toml").unlink()
+    before = (out / "fleet.csv").read_text()
     assert main(["fleet", "calibrate", str(root), "--out", str(out), "--quiet", "--json"]) == 0
     summary = json.loads(capsys.readouterr().out)
-    assert (summary["fitted"], summary["skipped"]) == (0, 10)
+    assert (summary["fitted"], summary["skipped"]) == (1, 9)
+    assert (out / "whisker-002" / "session-01.toml").exists()
+    after = (out / "fleet.csv").read_text()
+    assert after != before and len(after.splitlines()) == len(before.splitlines()) == 11
     check = tmp_path / "check"
     args = ["fleet", "check", str(out), "--baseline", "2", "--out", str(check), "--json"]
     assert main(args) == 0

@@ -15,13 +15,13 @@ _LAYOUT = (
 )
 _RULE = (
     "A later session is flagged for f1 or zeta when its change from the baseline (the mean of "
-    "the first --baseline usable sessions) has |z| >= --z AND is at least --min-change-f1 / "
-    "--min-change-zeta percent. z divides the change by sigma_day*sqrt(1+1/K), where "
-    "sigma_day is the largest of: the scatter of the baseline sessions, the spread of "
-    "repeated plucks within them (over the square root of the plucks per session) and the "
-    "median 1-sigma of the baseline fits (HAC where the residuals are correlated). The "
-    "p-value is the two-sided normal one of z. A later session whose fit failed is flagged "
-    "as 'fit'."
+    "the first --baseline K usable sessions) has |z| >= --z AND is at least --min-change-f1 / "
+    "--min-change-zeta percent. z divides the change by sqrt(sigma_day^2/K + max(sigma_day^2, "
+    "s^2/n)), s being the spread of the session's own n plucks, and sigma_day the largest of: "
+    "the scatter of the baseline sessions, the spread of repeated plucks within them (over "
+    "the square root of the plucks per session) and the median 1-sigma of the baseline fits "
+    "(HAC where the residuals are correlated). The p-value is the two-sided normal one of z. "
+    "A later session whose fit failed is flagged as 'fit'."
 )
 
 

@@ -25,7 +25,9 @@ record and the settings (so the same numbers come out in this process or on a cl
 already done with the same data, record and settings (a session's *key* is the SHA-256 of its
 files' SHA-256, the record's and the settings'), fits the rest in this process or on a Ray
 cluster, and writes each session's record ``OUT/<whisker>/<session>.toml`` and the table
-``OUT/fleet.csv`` (atomically, after each session: an interrupted run keeps what it finished).
+``OUT/fleet.csv`` (each atomically: a record as its session finishes, the table at most once a
+second and when the run ends or is interrupted, so that an interrupted run keeps what it
+finished).
 A session whose data cannot be read or fitted gets its own status and never stops the others.
 """
 
@@ -194,6 +196,11 @@ def fit_session(session: Session, settings: FleetSettings, key: str = "") -> dic
     row = {c: "" for c in COLUMNS}
     row.update(whisker=session.whisker, session=session.session, key=key,
                files=";".join(p.name for p in session.files))  # fmt: skip
+    try:
+        row["sha256"] = ";".join(sha256_of(p) for p in session.files)
+        row["record_sha256"] = sha256_of(session.record)
+    except OSError:
+        pass  # reported below, where the files are read
     toml_text = None
     try:
         record = load_record(session.record)
@@ -241,7 +248,6 @@ def _fit_plucks(session, settings, key, record, obs, row):
         f1_pluck_sd=f"{sd([_value(c, 'f1_hz')[0] for c in usable]):.4g}",
         zeta_pluck_sd=f"{sd([_value(c, 'zeta')[0] for c in usable]):.4g}",
         pluck_status=";".join(status_k),
-        sha256=";".join(sha256_of(p) for p in session.files),
     )
     out = joint.record
     fit = dict(out.extra["fit"])

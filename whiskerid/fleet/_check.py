@@ -12,8 +12,11 @@ The rule, per whisker and per parameter p (f_1 or ζ), with the sessions in name
   ``Σ(n_s − 1)`` degrees of freedom, divided by ``√n̄`` for a mean of ``n̄`` plucks), and the
   median 1σ the baseline fits report (their HAC 1σ when the residuals are correlated; on real
   recordings the white-noise 1σ of one fit is far smaller than the repeats' spread);
-* a later session's change ``Δ = v − m`` has ``σ_Δ = σ_day √(1 + 1/K)`` (its own noise and
-  that of the baseline's mean), ``z = Δ/σ_Δ`` and the two-sided p-value of a normal ``z``;
+* a later session's change ``Δ = v − m`` has ``σ_Δ² = σ_day²/K + max(σ_day², s²/n)`` (the
+  noise of the baseline's mean, and the session's own: never below what the spread ``s`` of
+  its own ``n`` plucks says, so that a session whose repeats disagree, e.g. plucks of very
+  different amplitude on a beam whose damping depends on it, cannot show a change smaller
+  than their disagreement), ``z = Δ/σ_Δ`` and the two-sided p-value of a normal ``z``;
 * the session is **flagged** for p when ``|z| ≥ z_min`` *and* the relative change ``|Δ/m|`` is
   at least a floor (defaults: 1 % for f_1, 20 % for ζ): the floor keeps a baseline whose
   repeats agree by chance to a tiny spread from flagging changes too small to matter (f_1 moves
@@ -53,8 +56,8 @@ class WhiskerHistory:
         baseline: Number of baseline sessions used (0: too few usable sessions).
         centre: Parameter → baseline centre ``m``.
         band: Parameter → half-width of the no-flag band around ``m``
-            (``max(z_min σ_Δ, floor |m|)``).
-        sigma: Parameter → ``σ_Δ``.
+            (``max(z_min σ_Δ, floor |m|)``, with ``σ_Δ`` of a session whose plucks agree).
+        sigma: Parameter → that ``σ_Δ``, ``σ_day √(1 + 1/K)``.
         flagged: Sessions flagged (for any parameter).
     """
 
@@ -185,10 +188,11 @@ def _check_whisker(whisker, rows, k, z_min, floors):
             row = rows[i]
             if not usable[i]:
                 continue
-            v = hist.values[p][i]
-            z = (v - m) / s_delta
+            v = float(hist.values[p][i])
+            s_i = _sigma_change(sigma, k, hist.plucks[p][i])
+            z = (v - m) / s_i
             rel = v / m - 1
-            flagged = abs(z) >= z_min and abs(rel) >= floors[p]
+            flagged = bool(abs(z) >= z_min and abs(rel) >= floors[p])
             changes.append(
                 {
                     "whisker": whisker,
@@ -197,7 +201,7 @@ def _check_whisker(whisker, rows, k, z_min, floors):
                     "value": v,
                     "baseline": m,
                     "change_pct": 100 * rel,
-                    "sigma": s_delta,
+                    "sigma": s_i,
                     "z": z,
                     "p_value": math.erfc(abs(z) / math.sqrt(2)),
                     "flagged": flagged,
@@ -223,6 +227,16 @@ def _check_whisker(whisker, rows, k, z_min, floors):
             )
     hist.flagged = sorted({c["session"] for c in changes if c["flagged"]})
     return hist, changes, None
+
+
+def _sigma_change(sigma_day: float, k: int, plucks: list[float]) -> float:
+    """``σ_Δ`` of one later session: the baseline mean's noise and the session's own, the
+    latter no smaller than its own plucks' spread says (a session whose repeats disagree
+    cannot show a change smaller than their disagreement)."""
+    own = sigma_day**2
+    if len(plucks) > 1:
+        own = max(own, float(np.var(plucks, ddof=1)) / len(plucks))
+    return math.sqrt(sigma_day**2 / k + own)
 
 
 def _sigma_day(hist: WhiskerHistory, p: str, base: np.ndarray) -> float:
