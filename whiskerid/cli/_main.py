@@ -22,6 +22,7 @@ from . import (
     _dataset,
     _demo,
     _evaluate,
+    _fleet,
     _posterior,
     _record,
     _simulate,
@@ -85,6 +86,7 @@ def build_parser() -> argparse.ArgumentParser:
     _record.add_parser(sub)
     _analyze.add_parser(sub)
     _stream.add_parser(sub)
+    _fleet.add_parser(sub)
     return parser
 
 

@@ -6,6 +6,7 @@ optional ``plot`` extra).
 
 from ._calibrate import plot_calibration as plot_calibration
 from ._classify import plot_confusion as plot_confusion
+from ._fleet import plot_fleet_history as plot_fleet_history
 from ._plot import plot_dominant_frequencies as plot_dominant_frequencies
 from ._plot import plot_modal_analysis as plot_modal_analysis
 from ._plot import plot_recording_labels as plot_recording_labels

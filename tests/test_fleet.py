@@ -1,0 +1,243 @@
+"""Fleet calibration and change detection, on a tiny simulated fleet on disk.
+
+Three whiskers × three sessions × two plucks (one file each), from
+:func:`whiskerid.fleet.simulate_fleet` (the exact model, Hall sensor, ADS1115), one whisker
+with ζ × 1.5 from its last session on, and a session holding a corrupt file.
+"""
+
+import json
+import math
+import shutil
+import subprocess
+import sys
+
+import jax
+import numpy as np
+import pytest
+
+from whiskerid.cli import main
+from whiskerid.fleet import (
+    COLUMNS,
+    LayoutError,
+    calibrate_fleet,
+    check_fleet,
+    discover,
+    local_runner,
+    read_table,
+    simulate_fleet,
+)
+
+_COMPILES: list[str] = []
+
+
+def _listen(event, duration, **kwargs):
+    if event == "/jax/core/compile/backend_compile_duration":
+        _COMPILES.append(event)
+
+
+jax.monitoring.register_event_duration_secs_listener(_listen)
+
+
+@pytest.fixture(scope="module")
+def fleet(tmp_path_factory):
+    """The simulated fleet, its truth, and one calibration run of it."""
+    base = tmp_path_factory.mktemp("fleet")
+    root, out = base / "root", base / "out"
+    truth = simulate_fleet(root, whiskers=3, sessions=3, plucks=2, damaged=1, baseline=2, seed=1)
+    bad = root / "whisker-001" / "session-99"
+    bad.mkdir()
+    (bad / "pluck-1.csv").write_text("t,adc\n0.0,12\nnot a number,\n")
+    per_session = []
+    runner = _counting(local_runner, per_session)
+    run = calibrate_fleet(root, out, runner=runner)
+    return {"root": root, "out": out, "truth": truth, "run": run, "compiles": per_session}
+
+
+def _counting(runner, counts):
+    """``runner`` that records the compilations of each session it fits."""
+
+    def run(sessions, settings, keys):
+        before = len(_COMPILES)
+        for result in runner(sessions, settings, keys):
+            counts.append(len(_COMPILES) - before)
+            before = len(_COMPILES)
+            yield result
+
+    return run
+
+
+def _copy(fleet, tmp_path):
+    root, out = tmp_path / "root", tmp_path / "out"
+    shutil.copytree(fleet["root"], root)
+    shutil.copytree(fleet["out"], out)
+    return root, out
+
+
+def test_calibrate_recovers_the_truth_and_keeps_a_bad_file_apart(fleet):
+    run, truth = fleet["run"], fleet["truth"]
+    assert (run.sessions, run.fitted, run.skipped, run.failed) == (10, 10, 0, 1)
+    rows = {(r["whisker"], r["session"]): r for r in read_table(fleet["out"] / "fleet.csv")}
+    bad = rows.pop(("whisker-001", "session-99"))
+    assert bad["status"] == "bad data" and "pluck-1.csv" in bad["checks"]
+    assert not (fleet["out"] / "whisker-001" / "session-99.toml").exists()
+    for t in truth.sessions:
+        row = rows[(t["whisker"], t["session"])]
+        assert row["status"] in ("ok", "check"), row
+        assert float(row["f1_hz"]) == pytest.approx(t["f1_hz"], rel=3e-3)
+        assert float(row["zeta"]) == pytest.approx(t["zeta"], rel=0.1)
+        assert int(row["n_plucks"]) == 2 and len(row["f1_plucks"].split(";")) == 2
+        assert row["pluck_status"] in ("ok;ok", "ok;check", "check;ok", "check;check")
+        assert len(row["sha256"].split(";")) == 2
+        assert (fleet["out"] / t["whisker"] / f"{t['session']}.toml").exists()
+
+
+def test_sessions_of_one_shape_compile_once(fleet):
+    # later sessions are other whiskers' plucks of the lengths already compiled
+    counts = fleet["compiles"]
+    assert counts[0] > 0 and counts[1:] == [0] * 9, counts
+
+
+def test_rerun_fits_only_what_is_new(fleet, tmp_path):
+    root, out = _copy(fleet, tmp_path)
+    again = calibrate_fleet(root, out)
+    assert (again.fitted, again.skipped) == (0, 10)
+    new = root / "whisker-000" / "session-03"
+    shutil.copytree(root / "whisker-000" / "session-02", new)
+    counts = []
+    third = calibrate_fleet(root, out, runner=_counting(local_runner, counts))
+    assert (third.fitted, third.skipped) == (1, 10) and counts == [0]
+    rows = {(r["whisker"], r["session"]): r for r in third.rows}
+    old = rows[("whisker-000", "session-02")]
+    assert rows[("whisker-000", "session-03")]["f1_hz"] == old["f1_hz"]
+
+
+def test_an_interrupted_run_keeps_what_it_finished(fleet, tmp_path):
+    root, out = _copy(fleet, tmp_path)
+    (out / "fleet.csv").unlink()
+
+    def stop_after_two(sessions, settings, keys):
+        for k, result in enumerate(local_runner(sessions, settings, keys)):
+            if k == 2:
+                raise KeyboardInterrupt
+            yield result
+
+    with pytest.raises(KeyboardInterrupt):
+        calibrate_fleet(root, out, runner=stop_after_two)
+    assert len(read_table(out / "fleet.csv")) == 2
+    asked = []
+
+    def spy(sessions, settings, keys):
+        asked.append(len(sessions))
+        return iter(())
+
+    calibrate_fleet(root, out, runner=spy)
+    assert asked == [8]
+
+
+def test_a_foreign_file_is_never_overwritten(fleet, tmp_path):
+    root, out = _copy(fleet, tmp_path)
+    (out / "fleet.csv").unlink()
+    mine = out / "whisker-000" / "session-00.toml"
+    mine.write_text("name = 'mine'\n")
+    with pytest.raises(ValueError, match="not written by a fleet run"):
+        calibrate_fleet(root, out)
+    assert mine.read_text() == "name = 'mine'\n"
+
+
+def test_check_flags_the_damaged_whisker_only(fleet):
+    rows = [r for r in fleet["run"].rows if r["session"] != "session-99"]
+    result = check_fleet(rows, baseline=2)
+    (whisker, (first, kind)), = fleet["truth"].damage.items()  # fmt: skip
+    flagged = {(f["whisker"], f["session"], f["parameter"]) for f in result.flags}
+    assert flagged == {(whisker, first, "zeta" if kind == "zeta" else "f1_hz")}
+
+
+# Synthetic tables: per-pluck scatter 0.1 % (f1) and 4 % (ζ), day-to-day 0.2 % and 5 %.
+@pytest.mark.parametrize(
+    ("f1_factor", "zeta_factor", "expected"),
+    [(0.97, 1.0, {"f1_hz"}), (1.0, 1.5, {"zeta"}), (1.0, 1.0, set()), (0.995, 1.1, set())],
+)
+def test_check_rule(f1_factor, zeta_factor, expected):
+    rng = np.random.default_rng(0)
+    rows = []
+    for s in range(6):
+        hurt = s >= 4
+        f1_day = 46.0 * (1 + 0.002 * rng.normal()) * (f1_factor if hurt else 1.0)
+        zeta_day = 0.04 * (1 + 0.05 * rng.normal()) * (zeta_factor if hurt else 1.0)
+        f1_k = f1_day * (1 + 0.001 * rng.normal(size=3))
+        zeta_k = zeta_day * (1 + 0.04 * rng.normal(size=3))
+        rows.append({
+            "whisker": "w", "session": f"s{s}", "status": "ok", "f1_hz": str(f1_k.mean()),
+            "f1_std": "0.001", "zeta": str(zeta_k.mean()), "zeta_std": "0.0001",
+            "f1_plucks": ";".join(map(str, f1_k)), "zeta_plucks": ";".join(map(str, zeta_k)),
+            "pluck_status": "ok;ok;ok",
+        })  # fmt: skip
+    result = check_fleet(rows, baseline=3)
+    assert {f["parameter"] for f in result.flags} == expected
+    assert all(f["session"] in ("s4", "s5") for f in result.flags)
+    for f in result.flags:
+        assert f["p_value"] == pytest.approx(math.erfc(abs(f["z"]) / math.sqrt(2)))
+
+
+def _layouts(tmp_path):
+    ok = tmp_path / "ok" / "w1"
+    (ok / "s1").mkdir(parents=True)
+    (ok / "whisker.toml").write_text("")
+    (ok / "s1" / "a.csv").write_text("")
+    return ok
+
+
+@pytest.mark.parametrize(
+    ("damage", "message"),
+    [
+        (lambda w: (w / "whisker.toml").unlink(), "no record"),
+        (lambda w: (w / "x.csv").write_text(""), "not in a session folder"),
+        (lambda w: (w / "s2").mkdir(), "holds no recordings"),
+        (lambda w: (w.parent / "y.npy").write_text(""), "directly"),
+        (lambda w: shutil.rmtree(w.parent), "does not exist"),
+    ],
+)
+def test_a_bad_layout_says_what_was_found_and_expected(tmp_path, damage, message):
+    w = _layouts(tmp_path)
+    assert [s.session for s in discover(w.parent)] == ["s1"]
+    damage(w)
+    with pytest.raises(LayoutError, match=message) as err:
+        discover(w.parent)
+    assert "expected" in str(err.value) or "record" in str(err.value)
+
+
+def test_cli_writes_the_table_flags_and_plots(fleet, tmp_path, capsys):
+    root, out = _copy(fleet, tmp_path)
+    (out / "whisker-002" / "session-01.toml").unlink()
+    before = (out / "fleet.csv").read_text()
+    assert main(["fleet", "calibrate", str(root), "--out", str(out), "--quiet", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert (summary["fitted"], summary["skipped"]) == (1, 9)
+    assert (out / "whisker-002" / "session-01.toml").exists()
+    after = (out / "fleet.csv").read_text()
+    assert after != before and len(after.splitlines()) == len(before.splitlines()) == 11
+    check = tmp_path / "check"
+    args = ["fleet", "check", str(out), "--baseline", "2", "--out", str(check), "--json"]
+    assert main(args) == 0
+    result = json.loads(capsys.readouterr().out)
+    (whisker, _), = fleet["truth"].damage.items()  # fmt: skip
+    assert result["flagged_whiskers"] == 1
+    assert (check / f"{whisker}.png").stat().st_size > 1000
+    lines = (check / "flags.csv").read_text().splitlines()
+    assert lines[0].startswith("whisker,session,parameter") and whisker in lines[1]
+    assert main(["fleet", "check", str(tmp_path / "nowhere")]) == 2
+    assert "fleet calibrate" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_ray_with_two_workers_gives_the_local_table(fleet, tmp_path):
+    pytest.importorskip("ray")
+    out = tmp_path / "ray-out"
+    cmd = [sys.executable, "-m", "whiskerid.cli", "fleet", "calibrate", str(fleet["root"]),
+           "--out", str(out), "--ray", "local", "--workers", "2", "--quiet"]  # fmt: skip
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    local = read_table(fleet["out"] / "fleet.csv")
+    remote = read_table(out / "fleet.csv")
+    same = [c for c in COLUMNS if c not in ("fitted_at", "fit_s")]
+    assert [[r[c] for c in same] for r in remote] == [[r[c] for c in same] for r in local]

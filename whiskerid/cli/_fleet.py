@@ -1,0 +1,257 @@
+"""``whiskerid fleet calibrate|check``: calibrate many whiskers session after session, and
+flag the sessions in which a whisker has changed."""
+
+import sys
+from pathlib import Path
+
+from .._choices import OBSERVABLES, PINS, SOLVERS
+from ._common import QUIET_HELP, WATCH, CommandError, HelpFormatter, check_outputs, say
+
+_LAYOUT = (
+    "ROOT/<whisker-id>/<session>/<recordings>.csv|.npy|.npz, one folder per whisker and per "
+    "session (sessions are taken in the order of their names: name them so that they sort in "
+    "time, e.g. 2026-11-25), each whisker's record in ROOT/<whisker-id>/whisker.toml (or one "
+    "shared record with --whisker)"
+)
+_RULE = (
+    "A later session is flagged for f1 or zeta when its change from the baseline (the mean of "
+    "the first --baseline K usable sessions) has |z| >= --z AND is at least --min-change-f1 / "
+    "--min-change-zeta percent. z divides the change by sqrt(sigma_day^2/K + max(sigma_day^2, "
+    "s^2/n)), s being the spread of the session's own n plucks, and sigma_day the largest of: "
+    "the scatter of the baseline sessions, the spread of repeated plucks within them (over "
+    "the square root of the plucks per session) and the median 1-sigma of the baseline fits "
+    "(HAC where the residuals are correlated). The p-value is the two-sided normal one of z. "
+    "A later session whose fit failed is flagged as 'fit'."
+)
+
+
+def add_parser(sub) -> None:
+    """Register the ``fleet`` command and its two sub-commands."""
+    p = sub.add_parser(
+        "fleet",
+        help="calibrate a fleet of whiskers session after session, and flag changed whiskers",
+        description=(
+            "Whisker health across a fleet. 'fleet calibrate' fits every session of every "
+            "whisker (skipping what is done), 'fleet check' flags the sessions in which a "
+            f"whisker's f1 or zeta has changed. Layout: {_LAYOUT}."
+        ),
+        formatter_class=HelpFormatter,
+    )
+    fsub = p.add_subparsers(dest="fleet_command", required=True, metavar="SUBCOMMAND")
+    _add_calibrate(fsub)
+    _add_check(fsub)
+
+
+def _add_calibrate(fsub) -> None:
+    p = fsub.add_parser(
+        "calibrate",
+        help="fit every new session into one record each and the table FLEET/fleet.csv",
+        description=(
+            "Calibrate every session of every whisker: each pluck on its own (their spread "
+            "is what 'fleet check' judges changes by) and all plucks of a session jointly "
+            "(the session's f1, zeta, 1-sigma and record FLEET/<whisker>/<session>.toml, as "
+            "'whiskerid calibrate --out' writes it). Each pluck is cut to the longest power of "
+            "two samples it holds (the decay's start kept, at most half of its tail dropped), "
+            "so that plucks of one length are fitted by one compiled program whatever the "
+            "whisker; windows under 64 samples or 5 periods of f1 are left out. The table "
+            "FLEET/fleet.csv "
+            "holds per session: f1, zeta and their 1-sigma, the uncertainty's kind, status, "
+            "failed checks, the single plucks' values and spread, the files' SHA-256 and when "
+            "it was fitted. A session already in the table with the same data, record and "
+            "settings is skipped, so a nightly run fits only what is new; a bad recording "
+            "gets its own status and the others go on. The table is rewritten atomically as "
+            f"sessions finish: an interrupted run keeps what it finished. Layout: {_LAYOUT}."
+        ),
+        formatter_class=HelpFormatter,
+    )
+    p.add_argument("root", type=Path, metavar="ROOT", help="the fleet's recordings")
+    p.add_argument(
+        "--out",
+        type=Path,
+        required=True,
+        metavar="FLEET",
+        help="output folder (records and fleet.csv); may hold an earlier run's",
+    )
+    p.add_argument("--whisker", type=Path,
+                   help="one record (TOML) for every whisker, instead of each whisker's "
+                   "ROOT/<whisker-id>/whisker.toml")  # fmt: skip
+    p.add_argument(
+        "--observable",
+        choices=("auto", *OBSERVABLES),
+        default="auto",
+        help="what the signal is; auto: from the column name or the units metadata",
+    )
+    p.add_argument("--time-col", default="t", help="time column (s)")
+    p.add_argument("--signal-col", help="signal column (the first one by default)")
+    p.add_argument("--scale", type=float, default=1.0, help="multiply the signal by this")
+    p.add_argument("--units-g", action="store_true", help="the signal is acceleration in g")
+    p.add_argument("--modes", type=int, default=2, help="modes in the model")
+    p.add_argument("--pin", choices=PINS, default="auto",
+                   help="what fixes EI or C (auto = geometry)")  # fmt: skip
+    p.add_argument("--solver", choices=SOLVERS, default="levenberg-marquardt",
+                   help="least-squares solver (optimistix)")  # fmt: skip
+    p.add_argument(
+        "--ray",
+        metavar="ADDRESS",
+        help="spread the sessions over a Ray cluster: 'auto' (the cluster this machine is in), "
+        "'local' (a private one on this machine, --workers CPUs) or an address; the numbers "
+        'are the same as without (needs pip install "whiskerid[fleet]"; the recordings '
+        "must be at the same path on every machine)",
+    )
+    p.add_argument("--workers", type=int, help="CPUs of a --ray local cluster (all by default)")
+    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
+    p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    p.set_defaults(func=_cmd_calibrate)
+
+
+def _add_check(fsub) -> None:
+    p = fsub.add_parser(
+        "check",
+        help="flag the sessions in which a whisker's f1 or zeta changed beyond its repeats",
+        description=(
+            "For each whisker, compare every session after the baseline with it. " + _RULE +
+            " Writes OUT/flags.csv (the flagged whisker-sessions: parameter, value, baseline, "
+            "change in percent, z, p-value) and OUT/<whisker>.png for each flagged whisker "
+            "(f1 and zeta over sessions, the baseline and its band), and prints the flags."
+        ),
+        formatter_class=HelpFormatter,
+    )  # fmt: skip
+    p.add_argument("fleet", type=Path, metavar="FLEET", help="a 'fleet calibrate' output folder")
+    p.add_argument("--out", type=Path, help="folder for flags.csv and the PNGs (FLEET/check)")
+    p.add_argument("--baseline", type=int, default=3,
+                   help="usable sessions forming each whisker's baseline (K)")  # fmt: skip
+    p.add_argument("--z", type=float, default=4.0, help="|z| at and above which a change counts")
+    p.add_argument("--min-change-f1", type=float, default=1.0,
+                   help="smallest relative change of f1 flagged (percent)")  # fmt: skip
+    p.add_argument("--min-change-zeta", type=float, default=20.0,
+                   help="smallest relative change of zeta flagged (percent)")  # fmt: skip
+    p.add_argument("--no-plots", action="store_true", help="write no PNGs")
+    p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    p.set_defaults(func=_cmd_check)
+
+
+# --------------------------------------------------------------------------- calibrate
+def _cmd_calibrate(args) -> dict:
+    if args.modes < 1 or args.modes > 10:
+        raise CommandError(f"--modes {args.modes} must be between 1 and 10")
+    if args.workers is not None and args.workers < 1:
+        raise CommandError(f"--workers {args.workers} must be at least 1")
+    if args.workers is not None and args.ray != "local":
+        raise CommandError("--workers sets the size of a --ray local cluster; add --ray local")
+    if not args.root.is_dir():
+        raise CommandError(f"ROOT {args.root} is not a folder; give the fleet's recordings")
+    check_outputs({"--out": args.out}, {"ROOT": args.root, "--whisker": args.whisker},
+                  force=True, folders=("--out",))  # fmt: skip
+    from ..fleet import FleetSettings, calibrate_fleet, ray_runner
+
+    settings = FleetSettings(
+        n_modes=args.modes, pin=args.pin, solver=args.solver, observable=args.observable,
+        time_col=args.time_col, signal_col=args.signal_col, scale=args.scale,
+        units_g=args.units_g,
+    )  # fmt: skip
+    runner = None
+    if args.ray:
+        runner = ray_runner(args.ray, num_cpus=args.workers)
+    table = args.out / "fleet.csv"
+    WATCH.notes.append(lambda: f"what finished is kept in {table}" if table.exists() else None)
+    run = calibrate_fleet(args.root, args.out, record=args.whisker, settings=settings,
+                          runner=runner, progress=not args.quiet)  # fmt: skip
+    say(
+        f"{run.sessions} session(s): {run.fitted} fitted ({run.failed} not ok), "
+        f"{run.skipped} already done; wrote {run.table}"
+    )
+    for row in run.rows:
+        if row["status"] not in ("ok", "check"):
+            say(f"  {row['whisker']}/{row['session']}: {row['status']}: {row['checks']}")
+    return {
+        "table": str(run.table),
+        "sessions": run.sessions,
+        "fitted": run.fitted,
+        "skipped": run.skipped,
+        "failed": run.failed,
+        "elapsed_s": round(run.elapsed_s, 3),
+        "ray": args.ray,
+    }
+
+
+# --------------------------------------------------------------------------- check
+def _cmd_check(args) -> dict:
+    from ..fleet import TABLE_NAME
+
+    table = args.fleet / TABLE_NAME
+    if not table.is_file():
+        raise CommandError(f"{args.fleet} holds no {TABLE_NAME}; run 'whiskerid fleet calibrate' "
+                           "first, or give its --out folder")  # fmt: skip
+    if args.baseline < 1:
+        raise CommandError(f"--baseline {args.baseline} must be at least 1")
+    for flag, v in (("--z", args.z), ("--min-change-f1", args.min_change_f1),
+                    ("--min-change-zeta", args.min_change_zeta)):  # fmt: skip
+        if not (v >= 0 and v < float("inf")) or (flag == "--z" and v == 0):
+            raise CommandError(f"{flag} {v!r} must be a positive number")
+    out = args.out or args.fleet / "check"
+    check_outputs({"--out": out}, {"FLEET table": table}, force=True, folders=("--out",))
+    from ..fleet import check_fleet, read_table
+
+    result = check_fleet(
+        read_table(table),
+        baseline=args.baseline,
+        z_min=args.z,
+        min_change={"f1_hz": args.min_change_f1 / 100, "zeta": args.min_change_zeta / 100},
+    )
+    flags_path = _write_flags(out / "flags.csv", result.flags)
+    plots = []
+    if not args.no_plots:
+        from ..plot import plot_fleet_history
+
+        for whisker in sorted({f["whisker"] for f in result.flags}):
+            h = result.histories[whisker]
+            plots.append(str(plot_fleet_history(
+                out / f"{whisker}.png", whisker, h.sessions, h.values, h.errors, h.plucks,
+                baseline=h.baseline, centre=h.centre, band=h.band, flagged=h.flagged,
+            )))  # fmt: skip
+    _print_flags(result)
+    return {
+        "flags": result.flags,
+        "changes": result.changes,
+        "notes": result.notes,
+        "settings": result.settings,
+        "flags_csv": str(flags_path),
+        "plots": plots,
+        "whiskers": len(result.histories),
+        "flagged_whiskers": len({f["whisker"] for f in result.flags}),
+    }
+
+
+_FLAG_COLUMNS = ("whisker", "session", "parameter", "value", "baseline", "change_pct",
+                 "sigma", "z", "p_value", "status")  # fmt: skip
+
+
+def _write_flags(path: Path, flags: list[dict]) -> Path:
+    import csv
+    import io
+
+    from ..io import atomic_write
+
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(_FLAG_COLUMNS)
+    for f in flags:
+        w.writerow([f"{f[c]:.6g}" if isinstance(f[c], float) else f[c] for c in _FLAG_COLUMNS])
+    return atomic_write(path, buf.getvalue())
+
+
+def _print_flags(result) -> None:
+    for note in result.notes:
+        say(f"note: {note}")
+    if not result.flags:
+        say(f"no change flagged in {len(result.histories)} whisker(s)")
+        return
+    say(f"{'whisker':<16} {'session':<16} {'param':<6} {'change':>9} {'z':>8} {'p':>9}")
+    for f in result.flags:
+        if f["parameter"] == "fit":
+            say(f"{f['whisker']:<16} {f['session']:<16} {'fit':<6} status {f['status']}")
+            continue
+        name = "f1" if f["parameter"] == "f1_hz" else "zeta"
+        say(f"{f['whisker']:<16} {f['session']:<16} {name:<6} {f['change_pct']:>+8.2f}% "
+            f"{f['z']:>8.1f} {f['p_value']:>9.2g}")  # fmt: skip
+    print(f"{len(result.flags)} flag(s)", file=sys.stderr)

@@ -1,0 +1,33 @@
+"""Whisker health across a fleet: many whiskers calibrated session after session, and the
+sessions in which one has changed.
+
+:func:`discover` finds the sessions of ``ROOT/<whisker-id>/<session>/<recordings>``;
+:func:`calibrate_fleet` fits them (skipping those done, in this process or on a Ray cluster
+through :func:`ray_runner`) into one record per session and the table ``fleet.csv``;
+:func:`check_fleet` compares each whisker's later sessions with its baseline;
+:func:`simulate_fleet` writes a simulated fleet with known damage to try it on.
+"""
+
+from .. import _jax_setup as _jax_setup
+from ._calibrate import COLUMNS as COLUMNS
+from ._calibrate import TABLE_NAME as TABLE_NAME
+from ._calibrate import FleetError as FleetError
+from ._calibrate import FleetRun as FleetRun
+from ._calibrate import FleetSettings as FleetSettings
+from ._calibrate import bucket_length as bucket_length
+from ._calibrate import calibrate_fleet as calibrate_fleet
+from ._calibrate import fit_session as fit_session
+from ._calibrate import fit_sessions as fit_sessions
+from ._calibrate import local_runner as local_runner
+from ._calibrate import read_table as read_table
+from ._calibrate import session_key as session_key
+from ._calibrate import write_table as write_table
+from ._check import FleetCheck as FleetCheck
+from ._check import WhiskerHistory as WhiskerHistory
+from ._check import check_fleet as check_fleet
+from ._layout import LayoutError as LayoutError
+from ._layout import Session as Session
+from ._layout import discover as discover
+from ._ray import ray_runner as ray_runner
+from ._simulate import FleetTruth as FleetTruth
+from ._simulate import simulate_fleet as simulate_fleet
