@@ -10,7 +10,7 @@ when f_1 is within 0.5 % and ζ within 10 % of the truth.
 
 Usage::
 
-    python benchmarks/calibrate_plucks.py [--cases 100] [--seed 0] [--out results.json]
+    python benchmarks/calibrate_plucks.py [--cases 100] [--seed 0] [--skip 0] [--out results.json]
 
 Prints one JSON object: the fraction right, the wrong fits reported ok, per-kind figures and
 the failing cases.
@@ -22,6 +22,7 @@ import sys
 import time
 from dataclasses import replace
 
+import jax
 import numpy as np
 
 from whiskerid.fit import calibrate, observations_from_recording
@@ -124,6 +125,8 @@ def main(argv=None):
     ap.add_argument("--cases", type=int, default=100, help="random cases to run")
     ap.add_argument("--seed", type=int, default=0, help="seed of the case draw")
     ap.add_argument("--out", help="also write the per-case results here (JSON)")
+    ap.add_argument("--skip", type=int, default=0,
+                    help="leave out the first N cases of the draw (resume a long run)")  # fmt: skip
     args = ap.parse_args(argv)
     # Cases drawn at random (kind, f_1 factor log-uniform 0.5-2, zeta log-uniform
     # 0.005-0.15, sampling rate), not a grid: nothing is tuned to a few chosen points.
@@ -139,7 +142,12 @@ def main(argv=None):
     ]
     results = []
     for k, (kind, ff, z, rate) in enumerate(grid):
+        if k < args.skip:
+            continue
         results.append(run_case(kind, ff, z, rate, seed=k))
+        # Every case has its own shapes: without this, a long run's compiled programs pile
+        # up until the compiler cannot map memory for more.
+        jax.clear_caches()
         r = results[-1]
         print(f"{kind:8s} f1x{ff:<5.3g} zeta {z:<6.3g} {rate:4.0f} Hz: f1 {r['f1_fit']:.4g}/"
               f"{r['f1_true']:.4g} zeta {r['zeta_fit']:.3g} {r['status'][:40]}"
