@@ -2,7 +2,8 @@
 
 JAX's persistent compilation cache points at a folder made for this run (removed at its end):
 a module whose compiled code was freed loads what an earlier module compiled instead of
-compiling it again. Nothing is kept between runs, so every run is a cold start.
+compiling it again, and with ``pytest -n 2`` (pytest-xdist) one worker loads what the other
+compiled. Nothing is kept between runs, so every run is a cold start.
 """
 
 import gc
@@ -15,7 +16,11 @@ import pytest
 
 jax.config.update("jax_enable_x64", True)
 
-_CACHE = tempfile.mkdtemp(prefix="whiskerid-test-jax-cache-")
+# Made once by the main pytest process; xdist's workers inherit it through the environment.
+_CACHE = os.environ.get("WHISKERID_TEST_JAX_CACHE") or tempfile.mkdtemp(
+    prefix="whiskerid-test-jax-cache-"
+)
+os.environ["WHISKERID_TEST_JAX_CACHE"] = _CACHE
 # Commands run as subprocesses use it too, instead of the user's cache folder.
 os.environ["WHISKERID_COMPILE_CACHE"] = _CACHE
 jax.config.update("jax_compilation_cache_dir", _CACHE)
@@ -24,8 +29,9 @@ jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
 
 
 def pytest_sessionfinish(session, exitstatus):
-    """Remove this run's compilation cache."""
-    shutil.rmtree(_CACHE, ignore_errors=True)
+    """Remove this run's compilation cache (the main process, after its workers)."""
+    if os.environ.get("PYTEST_XDIST_WORKER") is None:
+        shutil.rmtree(_CACHE, ignore_errors=True)
 
 
 @pytest.fixture(autouse=True, scope="module")
