@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -69,11 +70,7 @@ def _summary(runs: list[dict]) -> dict:
     for key in ("first_label_s", "total_s", "peak_rss_mib"):
         v = sorted(r[key] for r in runs if r[key] is not None)
         if v:
-            out[key] = (
-                v[len(v) // 2]
-                if len(v) % 2
-                else round((v[len(v) // 2 - 1] + v[len(v) // 2]) / 2, 3)
-            )
+            out[key] = round(statistics.median(v), 3)
             out[key + "_range"] = [v[0], v[-1]]
     return out
 
