@@ -131,31 +131,15 @@ def check_data_options(args) -> None:
         raise ValueError(f"--t-end {args.t_end:g} must be later than --t-start {args.t_start:g}")
 
 
-def _check_sampling(rec, record) -> None:
-    """Refuse ``rate_hz`` metadata at odds with the timestamps, and sampling far too slow
-    for the whisker's first mode (a time column in ms read as seconds is 1000 times too
-    slow): a fit to either would end with numbers, all of them wrong."""
-    from ..io import RecordingError, recording_rate, timestamp_rate
-
-    recording_rate(rec)
-    rate = timestamp_rate(rec.t, where=str(rec.source))
-    f1 = float(record.whisker().natural_frequencies_hz[0])
-    if f1 > 5 * rate:
-        raise RecordingError(
-            f"{rec.source}: sampled at {rate:.4g} Hz, far too slowly for the whisker's first "
-            f"mode ({f1:.4g} Hz from its record): is the time column in seconds?"
-        )
-
-
 def load_observations(path: Path, record, args) -> list:
     """Read one recording and turn it into :class:`whiskerid.fit.Observation` s per the
     flags: one per free decay found in a pluck recording (several plucks are fitted
     jointly), else one."""
-    from ..fit import observations_from_recording
+    from ..fit import check_sampling, observations_from_recording
     from ..io import read_recording
 
     rec = read_recording(path, time_col=args.time_col)
-    _check_sampling(rec, record)
+    check_sampling(rec, record)
     return observations_from_recording(
         rec,
         record,

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from .._choices import EXCITATIONS, OBSERVABLES
-from ..io import Recording, RecordingError, check_samples
+from ..io import Recording, RecordingError, check_samples, recording_rate, timestamp_rate
 from ..model import WhiskerRecord
 from ._release import find_decays, steady_line
 
@@ -144,6 +144,24 @@ def read_static_test(path: str | Path) -> StaticTest:
         x_m=None if x is None else float(x[0]),
         source=str(path),
     )
+
+
+def check_sampling(rec: Recording, record: WhiskerRecord) -> None:
+    """Refuse ``rate_hz`` metadata at odds with the timestamps, and sampling far too slow
+    for the whisker's first mode (a time column in ms read as seconds is 1000 times too
+    slow): a fit to either would end with numbers, all of them wrong.
+
+    Raises:
+        RecordingError: Naming the recording, the rate and the whisker's f_1.
+    """
+    recording_rate(rec)
+    rate = timestamp_rate(rec.t, where=str(rec.source))
+    f1 = float(record.whisker().natural_frequencies_hz[0])
+    if f1 > 5 * rate:
+        raise RecordingError(
+            f"{rec.source}: sampled at {rate:.4g} Hz, far too slowly for the whisker's first "
+            f"mode ({f1:.4g} Hz from its record): is the time column in seconds?"
+        )
 
 
 def nominal_gain(record: WhiskerRecord, observable: str) -> float:

@@ -46,8 +46,14 @@ from pathlib import Path
 import numpy as np
 
 from .._version import __version__
-from ..fit import CalibrationError, calibrate, observations_from_recording, sha256_of
-from ..io import RecordingError, atomic_write, read_recording, recording_rate, timestamp_rate
+from ..fit import (
+    CalibrationError,
+    calibrate,
+    check_sampling,
+    observations_from_recording,
+    sha256_of,
+)
+from ..io import RecordingError, atomic_write, read_recording
 from ..model import RecordError, load_record
 from ._layout import Session, discover
 
@@ -135,13 +141,7 @@ def _observations(files, record, settings: FleetSettings) -> list:
     f1 = float(record.whisker().natural_frequencies_hz[0])
     for path in files:
         rec = read_recording(path, time_col=settings.time_col)
-        recording_rate(rec)
-        rate = timestamp_rate(rec.t, where=str(path))
-        if f1 > 5 * rate:
-            raise RecordingError(
-                f"{path}: sampled at {rate:.4g} Hz, far too slowly for the whisker's first "
-                f"mode ({f1:.4g} Hz from its record): is the time column in seconds?"
-            )
+        check_sampling(rec, record)
         out += observations_from_recording(
             rec,
             record,
