@@ -5,8 +5,9 @@ emulated chip, in real time: what a restarted service does, without a robot) wit
 JAX compilation cache folder: the first run compiles (cold), the next ones load the compiled
 functions from the cache (warm: ``--warm-runs``, median and range). A last run with the
 cache off shows what the cache saves. For each run it prints the seconds from process start
-to the first label line on stderr and the process's peak resident memory (VmHWM), as one
-JSON object.
+to the first label line on stderr (``first_label_s``, which may be a fault such as
+``no-data``) and to the first terrain label (``first_terrain_s``), and the peak resident
+memory (VmHWM) of the stream's process and of its sampling process, as one JSON object.
 
     python benchmarks/stream_startup.py --model MODEL --replay REC.csv
 """
@@ -37,29 +38,47 @@ def peak_rss_mib(pid: int) -> float | None:
     return None
 
 
+def children(pid: int) -> list[int]:
+    """The process's child processes (its sampling process)."""
+    try:
+        with open(f"/proc/{pid}/task/{pid}/children") as f:
+            return [int(c) for c in f.read().split()]
+    except OSError:
+        return []
+
+
 def one_run(argv: list[str]) -> dict:
     start = time.perf_counter()
     proc = subprocess.Popen(argv, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
     first: list[float] = []
-    peak = [0.0]
+    terrain: list[float] = []
+    peak = [0.0, 0.0]
 
     def watch():
         while proc.poll() is None:
             peak[0] = max(peak[0], peak_rss_mib(proc.pid) or 0.0)
+            kids = sum(peak_rss_mib(c) or 0.0 for c in children(proc.pid))
+            peak[1] = max(peak[1], kids)
             time.sleep(0.05)
 
     watcher = threading.Thread(target=watch, daemon=True)
     watcher.start()
     assert proc.stderr is not None
     for line in proc.stderr:
-        if line.startswith("t = ") and not first:
-            first.append(time.perf_counter() - start)
+        if line.startswith("t = "):
+            now = time.perf_counter() - start
+            if not first:
+                first.append(now)
+            if " p = " in line and not terrain:  # a terrain, not a fault or no-data label
+                terrain.append(now)
     proc.wait()
     watcher.join()
     return {
         "first_label_s": round(first[0], 3) if first else None,
+        "first_terrain_s": round(terrain[0], 3) if terrain else None,
         "total_s": round(time.perf_counter() - start, 3),
         "peak_rss_mib": round(peak[0], 1),
+        "sampler_peak_rss_mib": round(peak[1], 1),
         "exit": proc.returncode,
     }
 
@@ -67,7 +86,13 @@ def one_run(argv: list[str]) -> dict:
 def _summary(runs: list[dict]) -> dict:
     """Median and range of several runs' figures."""
     out = {"runs": len(runs), "exit": max(r["exit"] for r in runs)}
-    for key in ("first_label_s", "total_s", "peak_rss_mib"):
+    for key in (
+        "first_label_s",
+        "first_terrain_s",
+        "total_s",
+        "peak_rss_mib",
+        "sampler_peak_rss_mib",
+    ):
         v = sorted(r[key] for r in runs if r[key] is not None)
         if v:
             out[key] = round(statistics.median(v), 3)

@@ -52,6 +52,11 @@ from ._sampler import Gap as Gap
 from ._sampler import Sample as Sample
 from ._sampler import Sampler as Sampler
 from ._sampler import SamplerStats as SamplerStats
+from ._sampling_process import SamplerSpec as SamplerSpec
+from ._sampling_process import SamplingError as SamplingError
+from ._sampling_process import SamplingProcess as SamplingProcess
+from ._sampling_process import open_sampler as open_sampler
+from ._sampling_process import stream_config as stream_config
 
 # The stream loop's public names, loaded on first use (PEP 562): they bring in JAX.
 _STREAM_NAMES = (

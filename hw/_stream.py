@@ -183,14 +183,20 @@ class OnlineClassifier:
         pending = self.cut(t_s, value)
         return None if pending is None else self.classify(pending)
 
-    def cut(self, t_s: float, value: float) -> PendingWindow | None:
+    def cut(self, t_s: float, value: float, arrived_s: float | None = None) -> PendingWindow | None:
         """Add a sample; return the window to classify when one is due, else None.
 
         Cheap (a ring-buffer write, and every hop an interpolation onto the model's grid and
         a few checks): this is all the sampling loop does when the model runs on a worker
         thread.
+
+        Args:
+            t_s: The sample's time (s since the stream started).
+            value: Its value.
+            arrived_s: When it arrived, on this classifier's clock (default: now); latencies
+                are counted from it.
         """
-        arrived = self._clock()
+        arrived = self._clock() if arrived_s is None else arrived_s
         i = self._n % self._t.size
         self._t[i], self._x[i] = t_s, value
         self._n += 1
@@ -198,12 +204,12 @@ class OnlineClassifier:
             self._next_s = t_s + self.window_s
         return self._due(t_s, arrived)
 
-    def gap(self, t_s: float) -> PendingWindow | None:
+    def gap(self, t_s: float, arrived_s: float | None = None) -> PendingWindow | None:
         """Note a slot without a sample at ``t_s``; a window due by then is cut (``no-data``
         when the bus starved it), so that a dead bus still gives a label every hop."""
         if self._next_s is None:
             self._next_s = t_s + self.window_s
-        return self._due(t_s, self._clock())
+        return self._due(t_s, self._clock() if arrived_s is None else arrived_s)
 
     def _due(self, t_s: float, arrived: float) -> PendingWindow | None:
         assert self._next_s is not None
@@ -472,7 +478,10 @@ def run_stream(
     syncs on its timer, and windows that fall due get ``no-data`` labels.
 
     Args:
-        samples: The sample stream (e.g. ``Sampler.samples(duration_s=..., gaps=True)``).
+        samples: The sample stream (e.g. ``Sampler.samples(duration_s=..., gaps=True)``,
+            or a :class:`whiskerid.hw.SamplingProcess` sampling since before the model was
+            loaded). A stream with an ``arrived_s`` attribute gives the latest item's
+            arrival time: latencies then count the time a sample waited before it was read.
         online: Ring buffer, windowing and model.
         recorder: Optional :class:`whiskerid.hw.Recorder`; closed at the end. With several
             columns it gets one row per complete round of inputs.
@@ -502,12 +511,15 @@ def run_stream(
 
     worker = BackgroundClassifier(online, _labelled).start() if background else None
     signal.signal(signal.SIGTERM, _terminate)
+    # Samples that waited (in a sampling process's pipe) carry their arrival time.
+    waited = samples if hasattr(samples, "arrived_s") else None
     try:
         for s in samples:
+            arrived = None if waited is None else waited.arrived_s
             if isinstance(s, Gap):
                 if recorder is not None:
                     recorder.maybe_sync()
-                pending = online.gap(s.t_s) if s.channel == channel else None
+                pending = online.gap(s.t_s, arrived) if s.channel == channel else None
             else:
                 summary.samples += 1
                 summary.duration_s = s.t_s
@@ -518,7 +530,7 @@ def run_stream(
                     recorder.write(s.t_s, s.code)
                 if s.channel != channel:
                     continue
-                pending = online.cut(s.t_s, s.volts if use_volts else s.code)
+                pending = online.cut(s.t_s, s.volts if use_volts else s.code, arrived)
             if pending is None:
                 continue
             if worker is not None:

@@ -131,10 +131,10 @@ def run(args) -> dict:
         labels_to = args.labels_to and hw.parse_endpoint(args.labels_to, "--labels-to")
     except ValueError as e:
         raise CommandError(str(e)) from None
-    cache = _use_compile_cache(args.compile_cache)
-    model = _load_model(args)
-    clock = hw.FakeClock() if args.fast else None
-    timing = {} if clock is None else {"clock": clock.now_ns, "sleep": clock.sleep}
+    cache = _cache_folder(args.compile_cache)
+    model = None
+    if args.simulate is not None:  # the simulator needs JAX, and the model's labels first
+        model = _load_model(args, cache)
     replayed = None
     if args.replay is not None:
         from ..io import read_recording
@@ -142,58 +142,58 @@ def run(args) -> dict:
         replayed = read_recording(args.replay)
         if args.duration is None:  # the recording's length: after it there is no signal
             args.duration = float(replayed.t[-1] - replayed.t[0])
-    speed = _speed(args, replayed)
-    bus = _bus(hw, args, inputs, replayed, timing)
-    n = len(inputs)
-    cfg = hw.DEFAULT_CONFIG.replace(mux=inputs[0].mux)
-    if n == 1:
-        adc = hw.ADS1115(bus, inputs[0].address, config=cfg, **timing)
-    else:
-        try:
-            cfg = cfg.replace(data_rate_sps=hw.data_rate_for(1.0 / (n * args.rate)))
-        except ValueError as e:
-            raise CommandError(f"--inputs {args.inputs} at --rate {args.rate:g}: {e}") from None
-        adc = hw.InputScan(bus, inputs, config=cfg, **timing)
-    sampler = hw.Sampler(adc, args.rate, **timing)
-    meta = _meta(args, inputs, speed, cfg)
-    recorder = _open_recorder(hw, args, inputs, meta, timing)
-    volts = getattr(model, "channel", None) in ("voltage", "volts")
-    lsb = cfg.fsr_v / 32768 if volts else 1.0
-    limits = (-cfg.fsr_v, cfg.fsr_v) if volts else (-32768, 32767)
-    quiet = args.stopped_below * lsb if args.stopped_below > 0 else None
-    online = hw.OnlineClassifier(model, hop_s=args.hop, speed_mps=speed, limits=limits,
-                                 quiet_std=quiet)  # fmt: skip
-    online.warm_up(cache)  # compile (or load from the cache) before the first sample
-    sink = None if labels_to is None else hw.LabelSink(labels_to)
-    summary = hw.StreamSummary()
-
-    def show(w):
-        if sink is not None:
-            sink(w)
-        episode = summary.add(w)
-        if episode == "start":
-            print(f"t = {w.t_end_s:8.2f} s  {w.label}: {w.reason}", file=sys.stderr)
-        elif episode == "end":
-            print(f"t = {w.t_end_s:8.2f} s  the fault is over", file=sys.stderr)
-        elif not args.quiet and not w.fault:
-            alone = "" if w.window_label in ("", w.label) else f"  [window alone: {w.window_label}]"
-            print(f"t = {w.t_end_s:8.2f} s  {w.label:<12s} p = {w.confidence:.2f}  "
-                  f"({w.latency_s * 1e3:.2f} ms){alone}", file=sys.stderr)  # fmt: skip
-
-    # The summary is counted in show(): run_stream gets a throwaway one, so no double count.
     try:
-        # A virtual clock never waits, so a worker thread would only fall behind: run inline.
+        cfg = hw.stream_config(inputs, args.rate)
+    except ValueError as e:
+        raise CommandError(f"--inputs {args.inputs} at --rate {args.rate:g}: {e}") from None
+    speed = _speed(args, replayed)
+    spec = hw.SamplerSpec(inputs=args.inputs, address=args.address, rate_hz=args.rate,
+                          duration_s=args.duration, i2c_bus=args.i2c_bus,
+                          replay=None if args.replay is None else str(args.replay),
+                          seed=args.seed)  # fmt: skip
+    sources = _sources(hw, args, inputs, replayed)
+    sampler = bus = None
+    if args.simulate is None and not args.fast:
+        # Sampling starts now, in a process of its own: the first window fills while JAX
+        # starts and the model loads, and the model never holds up the sampling schedule.
+        samples = hw.SamplingProcess(spec)
+    else:
+        # The simulator lives here (JAX); a virtual clock never waits: sample inline.
+        clock = hw.FakeClock() if args.fast else None
+        timing = {} if clock is None else {"clock": clock.now_ns, "sleep": clock.sleep}
+        sampler, bus, _, _ = hw.open_sampler(spec, sources=sources, **timing)
         samples = sampler.samples(duration_s=args.duration, gaps=True)
-        stats = hw.run_stream(samples, online, recorder=recorder, on_label=show,
-                              background=not args.fast)  # fmt: skip
+    sink = recorder = None
+    try:
+        if model is None:
+            model = _load_model(args, cache)
+        volts = getattr(model, "channel", None) in ("voltage", "volts")
+        lsb = cfg.fsr_v / 32768 if volts else 1.0
+        limits = (-cfg.fsr_v, cfg.fsr_v) if volts else (-32768, 32767)
+        quiet = args.stopped_below * lsb if args.stopped_below > 0 else None
+        online = hw.OnlineClassifier(model, hop_s=args.hop, speed_mps=speed, limits=limits,
+                                     quiet_std=quiet)  # fmt: skip
+        online.warm_up(cache)  # compile (or load from the cache) before the first window
+        # Opened once the model is ready, so a model that fails leaves no file behind.
+        recorder = _open_recorder(hw, args, inputs, _meta(args, inputs, speed, cfg))
+        sink = None if labels_to is None else hw.LabelSink(labels_to)
+        summary = hw.StreamSummary()
+        try:
+            stats = _run(hw, args, samples, online, recorder, sink, summary)
+        except hw.SamplingError as e:
+            raise CommandError(f"{_source_name(args)}: {e}") from None
     finally:
+        if isinstance(samples, hw.SamplingProcess):
+            samples.close()
+        if recorder is not None:
+            recorder.close()  # run_stream closes it; here for a failure before it ran
         for closing in (sink, speed if isinstance(speed, hw.SpeedFeed) else None, bus):
             if closing is not None:
                 closing.close()
     summary.samples, summary.duration_s = stats.samples, stats.duration_s
     summary.skipped_windows, summary.dropped_windows = stats.skipped_windows, stats.dropped_windows
     summary.record, summary.stopped_by = stats.record, stats.stopped_by
-    st = sampler.stats
+    st = samples.stats if sampler is None else sampler.stats
     summary.gaps, summary.overruns = st.gaps, st.overruns
     summary.bus_errors = {"timeouts": st.timeouts, "other_errors": st.other_errors,
                           "last_error": st.last_error}  # fmt: skip
@@ -212,31 +212,59 @@ def run(args) -> dict:
     return out
 
 
-def _use_compile_cache(option: str | None) -> Path | None:
-    """Point JAX's persistent compilation cache at the folder (before anything compiles);
-    returns the folder, or None when the cache is off."""
+def _run(hw, args, samples, online, recorder, sink, summary):
+    """Feed the samples to the classifier; labels go to the sink, the summary and stderr."""
+
+    def show(w):
+        if sink is not None:
+            sink(w)
+        episode = summary.add(w)
+        if episode == "start":
+            print(f"t = {w.t_end_s:8.2f} s  {w.label}: {w.reason}", file=sys.stderr)
+        elif episode == "end":
+            print(f"t = {w.t_end_s:8.2f} s  the fault is over", file=sys.stderr)
+        elif not args.quiet and not w.fault:
+            alone = "" if w.window_label in ("", w.label) else f"  [window alone: {w.window_label}]"
+            print(f"t = {w.t_end_s:8.2f} s  {w.label:<12s} p = {w.confidence:.2f}  "
+                  f"({w.latency_s * 1e3:.2f} ms){alone}", file=sys.stderr)  # fmt: skip
+
+    # The summary is counted in show(): run_stream gets a throwaway one, so no double count.
+    # A virtual clock never waits, so a worker thread would only fall behind: run inline.
+    return hw.run_stream(samples, online, recorder=recorder, on_label=show,
+                         background=not args.fast)  # fmt: skip
+
+
+def _cache_folder(option: str | None) -> Path | None:
+    """The folder of JAX's persistent compilation cache (created), or None when it is off."""
     folder = None if option is not None and option.lower() == "none" else (
         Path(option) if option else cache_dir())  # fmt: skip
-    if folder is None:  # off, here or in the environment; the command line may have set it
-        import jax
-
-        jax.config.update("jax_enable_compilation_cache", False)
+    if folder is None:
         return None
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise CommandError(f"--compile-cache {folder}: cannot create it ({e.strerror}); give "
                            "another folder, or 'none'") from None  # fmt: skip
+    return folder
+
+
+def _use_compile_cache(folder: Path | None) -> None:
+    """Point JAX's persistent compilation cache at the folder (before anything compiles), or
+    switch it off (the command line may have switched it on through the environment)."""
     import jax
 
+    if folder is None:
+        jax.config.update("jax_enable_compilation_cache", False)
+        return
     jax.config.update("jax_compilation_cache_dir", str(folder))
     # The stream's functions are small: cache them all, however quick they were to compile.
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-    return folder
 
 
-def _load_model(args):
+def _load_model(args, cache: Path | None):
+    """The model, loaded with JAX's compilation cache set up; refuses one that cannot serve."""
+    _use_compile_cache(cache)
     from ..classify import RATE_TOLERANCE, ClassifierModel
 
     model = ClassifierModel.load(args.model)
@@ -245,7 +273,7 @@ def _load_model(args):
                             f"its labels are {', '.join(model.labels)}")  # fmt: skip
     if args.rate < model.rate_hz * (1 - RATE_TOLERANCE):
         # Resampling up cannot add what lies between the two Nyquist limits: every window
-        # would be refused or misread, so refuse before sampling starts.
+        # would be refused or misread, so refuse before any window is read.
         raise CommandError(
             f"--rate {args.rate:g} Hz is below the {model.rate_hz:g} Hz this model was trained "
             f"at: stream at {model.rate_hz:g} Hz or more, or train a model at {args.rate:g} Hz "
@@ -277,23 +305,29 @@ def _speed(args, replayed):
     return hw.odometry_speed(args.speed_from)
 
 
-def _bus(hw, args, inputs, replayed, timing):
+def _sources(hw, args, inputs, replayed) -> list | None:
+    """What the emulated chip's inputs play (the simulator's terrain or the replayed
+    recording), or None for a real chip."""
     if args.i2c_bus is not None:
-        return hw.open_bus(args.i2c_bus)
+        return None
     names = [i.name for i in inputs]
     if replayed is not None:
         try:
-            sources = hw.replay_sources(replayed, names)
+            return hw.replay_sources(replayed, names)
         except ValueError as e:
             raise CommandError(str(e)) from None
-    else:
-        record = record_or_paper(args.whisker)
-        # Up front for a short run; in chunks of fresh terrain for a long or endless one.
-        up_front = args.duration is not None and args.duration <= MAX_UP_FRONT_S
-        horizon = args.duration + 2.0 if up_front else None
-        sources = [hw.terrain_source(record, args.simulate, _nominal(args), horizon,
-                                     seed=args.seed + j) for j in range(len(inputs))]  # fmt: skip
-    return hw.emulated_bus(inputs, sources, seed=args.seed, **timing)
+    record = record_or_paper(args.whisker)
+    # Up front for a short run; in chunks of fresh terrain for a long or endless one.
+    up_front = args.duration is not None and args.duration <= MAX_UP_FRONT_S
+    horizon = args.duration + 2.0 if up_front else None
+    return [hw.terrain_source(record, args.simulate, _nominal(args), horizon,
+                              seed=args.seed + j) for j in range(len(inputs))]  # fmt: skip
+
+
+def _source_name(args) -> str:
+    if args.replay:
+        return f"--replay {args.replay}"
+    return f"--i2c-bus {args.i2c_bus}" if args.i2c_bus is not None else "the emulated chip"
 
 
 def _nominal(args) -> float:
@@ -312,7 +346,7 @@ def _meta(args, inputs, speed, cfg) -> dict:
     return meta
 
 
-def _open_recorder(hw, args, inputs, meta, timing):
+def _open_recorder(hw, args, inputs, meta):
     if args.record is None:
         return None
     if len(inputs) == 1:

@@ -1,0 +1,254 @@
+"""Sampling in a child process, so that the schedule never waits for the model.
+
+A stream's own process imports JAX, loads the model and runs it. Parts of that hold the
+interpreter's lock (the GIL) for many milliseconds at a time (loading a compiled library,
+deserialising a program, a model call), and a sampling thread of the same process misses its
+slots meanwhile: the first window after a start would come out short of samples. The child
+imports only the driver side (numpy, and smbus2 on a Pi), opens the bus, samples on its own
+schedule (on its own core, on a multi-core board) and writes each sample to its standard
+output as one JSON line; the parent reads them in order. The child starts before the parent
+imports JAX, so the first window fills while the model loads.
+
+Protocol, one JSON value per line on the child's standard output:
+
+* ``[t_s, code, volts, channel, round, sent_ns]``: a :class:`~whiskerid.hw.Sample`, and
+  when it was sent (``time.monotonic_ns()``, the system's monotonic clock, shared by the two
+  processes), from which the parent counts latencies;
+* ``{"gap": [t_s, channel, error, sent_ns]}``: a :class:`~whiskerid.hw.Gap`;
+* ``{"end": {...}}``: the sampler's :class:`~whiskerid.hw.SamplerStats`; the last line;
+* ``{"error": "..."}``: the child could not start (bus or recording not opened).
+
+The child stops when its standard input gives a line or ends: the parent's :meth:`close`, or
+the parent's death (even by ``kill -9``), so a sampling child is never left behind. It ignores
+Ctrl-C (the terminal sends it to both processes; the parent decides) and takes SIGTERM as a
+request to stop.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+
+from ._ads1115 import ADS1115, DEFAULT_CONFIG, Config, open_bus
+from ._emulator import replay_sources
+from ._inputs import Input, InputScan, data_rate_for, emulated_bus, parse_inputs
+from ._sampler import Gap, Sample, Sampler, SamplerStats
+
+
+class SamplingError(RuntimeError):
+    """The sampling process could not start or ended without its closing line."""
+
+
+@dataclasses.dataclass(frozen=True)
+class SamplerSpec:
+    """What a sampler reads: plain values, so that a child process can be given them as JSON.
+
+    Attributes:
+        inputs: The inputs, as ``whiskerid stream --inputs`` takes them (``A0``, ``A0,A1``).
+        address: The chip's 7-bit I2C address for inputs named without one.
+        rate_hz: Samples per second of each input.
+        duration_s: Stop after this many seconds; None runs until stopped.
+        i2c_bus: Read a real chip on ``/dev/i2c-<i2c_bus>``.
+        replay: Else replay this recording through the emulated chip.
+        seed: Seed of the emulated chip's noise.
+    """
+
+    inputs: str = "A0"
+    address: int = 0x48
+    rate_hz: float = 200.0
+    duration_s: float | None = None
+    i2c_bus: int | None = None
+    replay: str | None = None
+    seed: int = 0
+
+    def to_json(self) -> str:
+        """The spec as one line of JSON."""
+        return json.dumps(dataclasses.asdict(self))
+
+
+def stream_config(inputs: tuple[Input, ...], rate_hz: float) -> Config:
+    """The chip's configuration for a stream: the driver's default on the first input, and
+    for several inputs the slowest data rate whose conversion fits one slot.
+
+    Raises:
+        ValueError: When no data rate is fast enough for the inputs at this rate.
+    """
+    cfg = DEFAULT_CONFIG.replace(mux=inputs[0].mux)
+    if len(inputs) > 1:
+        cfg = cfg.replace(data_rate_sps=data_rate_for(1.0 / (len(inputs) * rate_hz)))
+    return cfg
+
+
+def open_sampler(spec: SamplerSpec, *, sources: list | None = None, **timing):
+    """The bus, converter and sampler a spec describes.
+
+    Args:
+        spec: What to read.
+        sources: One ``source(t_s) -> volts`` per input for the emulated chip (e.g. the
+            terrain simulator); by default the spec's replay, else a real chip.
+        **timing: ``clock`` and ``sleep`` for the chip and the sampler (a virtual clock).
+
+    Returns:
+        ``(sampler, bus, config, inputs)``; the caller closes the bus.
+
+    Raises:
+        ValueError: Unknown inputs, a rate the inputs cannot reach, or a recording that
+            cannot be replayed.
+        OSError, ImportError: A real bus that cannot be opened.
+    """
+    inputs = parse_inputs(spec.inputs, default_address=spec.address)
+    cfg = stream_config(inputs, spec.rate_hz)
+    if sources is None and spec.i2c_bus is None:
+        if spec.replay is None:
+            raise ValueError("a sampler needs a bus, a recording to replay or sources")
+        sources = replay_sources(spec.replay, [i.name for i in inputs])
+    if sources is None:
+        bus = open_bus(spec.i2c_bus)
+    else:
+        bus = emulated_bus(inputs, sources, seed=spec.seed, **timing)
+    if len(inputs) == 1:
+        adc = ADS1115(bus, inputs[0].address, config=cfg, **timing)
+    else:
+        adc = InputScan(bus, inputs, config=cfg, **timing)
+    return Sampler(adc, spec.rate_hz, **timing), bus, cfg, inputs
+
+
+class SamplingProcess:
+    """A sampler run by a child process from now on; iterate it for its samples, in order.
+
+    Iterating yields :class:`~whiskerid.hw.Sample` and :class:`~whiskerid.hw.Gap` items
+    until the spec's duration ends or :meth:`close` is called; :attr:`arrived_s` is the
+    latest item's arrival on ``clock`` (so that a window's latency counts the time its last
+    sample waited in the pipe), and :attr:`stats` the child's counters once it has ended.
+
+    Args:
+        spec: What the child samples.
+        python: The interpreter to run the child with.
+        clock: Seconds on a monotonic clock: the clock latencies are measured on.
+
+    Raises:
+        SamplingError: While iterating, when the child could not start or died.
+    """
+
+    def __init__(
+        self,
+        spec: SamplerSpec,
+        *,
+        python: str = sys.executable,
+        clock: Callable[[], float] = time.perf_counter,
+    ) -> None:
+        self.spec = spec
+        self.stats = SamplerStats()
+        self.arrived_s: float | None = None
+        self._clock = clock
+        self._ended = False
+        self._proc = subprocess.Popen(
+            [python, "-m", "whiskerid.hw._sampling_child", spec.to_json()],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+            bufsize=1,
+        )
+
+    def __iter__(self) -> Iterator[Sample | Gap]:
+        assert self._proc.stdout is not None
+        for line in self._proc.stdout:
+            item = self._item(json.loads(line))
+            if item is None:
+                return
+            yield item
+        self._died()
+
+    def _item(self, msg) -> Sample | Gap | None:
+        if isinstance(msg, list):
+            t_s, code, volts, channel, rnd, sent_ns = msg
+            self.arrived_s = self._arrival(sent_ns)
+            return Sample(t_s, code, volts, channel, rnd)
+        if "gap" in msg:
+            t_s, channel, error, sent_ns = msg["gap"]
+            self.arrived_s = self._arrival(sent_ns)
+            return Gap(t_s, channel, error)
+        if "end" in msg:
+            self.stats = SamplerStats(**msg["end"])
+            self._ended = True
+            return None
+        raise SamplingError(f"the sampling process could not start: {msg['error']}")
+
+    def _arrival(self, sent_ns: int) -> float:
+        # How long ago it was sent, on the shared monotonic clock, moved onto ours.
+        return self._clock() - max(time.monotonic_ns() - sent_ns, 0) * 1e-9
+
+    def _died(self) -> None:
+        code = self._proc.wait()
+        raise SamplingError(f"the sampling process ended unexpectedly (exit status {code})")
+
+    def close(self, timeout_s: float = 5.0) -> None:
+        """Stop the child, read its counters and wait for it (at most ``timeout_s``)."""
+        proc = self._proc
+        if proc.poll() is None and proc.stdin is not None and not proc.stdin.closed:
+            try:
+                proc.stdin.write("stop\n")
+                proc.stdin.close()
+            except OSError:  # already gone
+                pass
+        if not self._ended and proc.stdout is not None:
+            deadline = time.monotonic() + timeout_s
+            timer = threading.Timer(timeout_s, proc.kill)  # a child that hangs is killed
+            timer.start()
+            try:
+                for line in proc.stdout:
+                    msg = json.loads(line)
+                    if isinstance(msg, dict) and "end" in msg:
+                        self.stats = SamplerStats(**msg["end"])
+                        self._ended = True
+            finally:
+                timer.cancel()
+            timeout_s = max(deadline - time.monotonic(), 0.1)
+        try:
+            proc.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        if proc.stdout is not None:
+            proc.stdout.close()
+
+
+def serve(spec: SamplerSpec, out) -> int:
+    """The child: sample and write JSON lines until the duration ends or stdin says stop."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        sampler, bus, _, _ = open_sampler(spec)
+    except Exception as e:  # reported to the parent, which says it in its own words
+        out.write(json.dumps({"error": f"{type(e).__name__}: {e}"}) + "\n")
+        out.flush()
+        return 1
+    signal.signal(signal.SIGTERM, lambda signum, frame: sampler.stop())
+
+    def watch_stdin() -> None:
+        sys.stdin.readline()  # a line, or its end: the parent has gone
+        sampler.stop()
+
+    threading.Thread(target=watch_stdin, daemon=True).start()
+    try:
+        for item in sampler.samples(duration_s=spec.duration_s, gaps=True):
+            sent = time.monotonic_ns()
+            if isinstance(item, Gap):
+                line = json.dumps({"gap": [item.t_s, item.channel, item.error, sent]})
+            else:
+                line = json.dumps([item.t_s, int(item.code), float(item.volts), item.channel,
+                                   item.round, sent])  # fmt: skip
+            out.write(line + "\n")
+            out.flush()
+        out.write(json.dumps({"end": dataclasses.asdict(sampler.stats)}) + "\n")
+        out.flush()
+    except BrokenPipeError:  # the parent has gone: nothing to report to
+        return 0
+    finally:
+        bus.close()
+    return 0
