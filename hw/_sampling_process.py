@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import queue
 import signal
 import subprocess
 import sys
@@ -155,24 +156,45 @@ class SamplingProcess:
             text=True,
             bufsize=1,
         )
+        # A thread empties the pipe into a queue as lines come: were the child's writes to
+        # wait for a busy parent (the pipe holds a few seconds of samples), it would miss
+        # slots.
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._reader = threading.Thread(target=self._read, name="whiskerid-sampling-pipe",
+                                        daemon=True)  # fmt: skip
+        self._reader.start()
 
-    def __iter__(self) -> Iterator[Sample | Gap]:
+    def _read(self) -> None:
         assert self._proc.stdout is not None
         for line in self._proc.stdout:
-            item = self._item(json.loads(line))
+            msg = json.loads(line)
+            sent = msg[-1] if isinstance(msg, list) else msg.get("gap", [0])[-1]
+            self._queue.put((msg, self._arrival(sent) if sent else None))
+            if isinstance(msg, dict) and ("end" in msg or "error" in msg):
+                return
+        self._queue.put((None, None))  # the pipe closed without the closing line
+
+    def __iter__(self) -> Iterator[Sample | Gap]:
+        while not self._ended:
+            try:
+                # A timeout keeps the wait interruptible by Ctrl-C and SIGTERM everywhere.
+                msg, arrived = self._queue.get(timeout=0.2)
+            except queue.Empty:
+                continue
+            if msg is None:
+                self._died()
+            item = self._item(msg)
             if item is None:
                 return
+            self.arrived_s = arrived
             yield item
-        self._died()
 
     def _item(self, msg) -> Sample | Gap | None:
         if isinstance(msg, list):
-            t_s, code, volts, channel, rnd, sent_ns = msg
-            self.arrived_s = self._arrival(sent_ns)
+            t_s, code, volts, channel, rnd, _ = msg
             return Sample(t_s, code, volts, channel, rnd)
         if "gap" in msg:
-            t_s, channel, error, sent_ns = msg["gap"]
-            self.arrived_s = self._arrival(sent_ns)
+            t_s, channel, error, _ = msg["gap"]
             return Gap(t_s, channel, error)
         if "end" in msg:
             self.stats = SamplerStats(**msg["end"])
@@ -189,33 +211,32 @@ class SamplingProcess:
         raise SamplingError(f"the sampling process ended unexpectedly (exit status {code})")
 
     def close(self, timeout_s: float = 5.0) -> None:
-        """Stop the child, read its counters and wait for it (at most ``timeout_s``)."""
+        """Stop the child, take its counters and wait for it (at most ``timeout_s``, then it
+        is killed); idempotent."""
         proc = self._proc
-        if proc.poll() is None and proc.stdin is not None and not proc.stdin.closed:
+        if proc.stdin is not None and not proc.stdin.closed:
             try:
                 proc.stdin.write("stop\n")
                 proc.stdin.close()
             except OSError:  # already gone
                 pass
-        if not self._ended and proc.stdout is not None:
-            deadline = time.monotonic() + timeout_s
-            timer = threading.Timer(timeout_s, proc.kill)  # a child that hangs is killed
-            timer.start()
+        deadline = time.monotonic() + timeout_s
+        while not self._ended and time.monotonic() < deadline:
             try:
-                for line in proc.stdout:
-                    msg = json.loads(line)
-                    if isinstance(msg, dict) and "end" in msg:
-                        self.stats = SamplerStats(**msg["end"])
-                        self._ended = True
-            finally:
-                timer.cancel()
-            timeout_s = max(deadline - time.monotonic(), 0.1)
+                msg, _ = self._queue.get(timeout=max(deadline - time.monotonic(), 0.01))
+            except queue.Empty:
+                break
+            if msg is None:
+                break
+            if isinstance(msg, dict) and "end" in msg:
+                self._item(msg)
         try:
-            proc.wait(timeout_s)
+            proc.wait(max(deadline - time.monotonic(), 0.1))
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
-        if proc.stdout is not None:
+        self._reader.join(1.0)
+        if proc.stdout is not None and not self._reader.is_alive():
             proc.stdout.close()
 
 

@@ -1,4 +1,12 @@
-"""Test configuration: float64 everywhere (the models need it), compiled code freed per module.
+"""Test configuration: float64 everywhere (the models need it), compiled code freed per module,
+quick compilation.
+
+The tests compile hundreds of small programs that each run for milliseconds: compiling them
+dominates the suite's time, so LLVM's optimisation of the generated machine code is turned down
+(``--xla_backend_optimization_level=0`` in ``XLA_FLAGS``, set before JAX starts and inherited
+by the workers and by the commands the tests run). The programs compute the same thing; what
+changes is how fast their machine code runs, which the tests do not measure (results may differ
+in the last bits, far below any test's tolerance).
 
 JAX's persistent compilation cache points at a folder made for this run (removed at its end):
 a module whose compiled code was freed loads what an earlier module compiled instead of
@@ -11,8 +19,12 @@ import os
 import shutil
 import tempfile
 
-import jax
-import pytest
+_QUICK = "--xla_backend_optimization_level=0"
+if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
+    os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {_QUICK}".strip()
+
+import jax  # noqa: E402  (after XLA_FLAGS: JAX reads it when it starts)
+import pytest  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 
