@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from whiskerid.classify import (
+    ALIAS_SLOPE,
     WhiskerResponse,
     base_band_levels,
     evaluate_classifier,
@@ -100,7 +101,13 @@ def band_error(ws, record, seed: int, duration: float) -> dict:
     (vertical plane, one sensor) against the simulator's true base acceleration."""
     from whiskerid.classify import FeatureSpec
 
-    spec = FeatureSpec(rate_hz=ws.rate_hz, window=ws.windows.shape[-1], deconvolve=True)
+    spec = FeatureSpec(
+        rate_hz=ws.rate_hz,
+        window=ws.windows.shape[-1],
+        deconvolve=True,
+        extend_edges=True,
+        alias_slope=ALIAS_SLOPE,
+    )
     resp = WhiskerResponse(record, 20.0, 1)
     num = spec.numbers(resp)
     edges = np.asarray(spec.octave_edges())
@@ -116,7 +123,7 @@ def band_error(ws, record, seed: int, duration: float) -> dict:
         idx = np.flatnonzero(ws.recording == r)
         for i in idx:
             win = ws.windows[i][None]  # hall_a: the vertical plane
-            est = np.asarray(base_band_levels(through_filter(win, num.to_base), ws.rate_hz,
+            est = np.asarray(base_band_levels(through_filter(win, num.to_base, True), ws.rate_hz,
                                               edges))[0]  # fmt: skip
             start = t0 + ws.start_s[i]
             fine = (t_grid >= start) & (t_grid < start + n / ws.rate_hz)

@@ -97,6 +97,21 @@ class FeatureSpec:
             recoloured, has its floor (ADC noise, quantisation, the error of timestamp
             jitter) raised wherever it responds more weakly than the reference; with the
             floor matched, training and use see the same floor.
+        extend_edges: With ``deconvolve``: filter each window extended at both ends by
+            half a window of its own continuation (a linear predictor fitted to it,
+            :func:`extend_window`), tapered to zero, instead of by zeros. A zero-extended
+            window steps at its edges, and dividing out a whisker (a second derivative
+            around its resonance) turns the steps into spikes that the reference
+            whisker's resonance rings: they raise the envelope's kurtosis, the crest
+            factor and the high bands of every window of another whisker, never of the
+            training whisker's own (recoloured to itself by the identity). False by
+            default so that model files written before it existed keep their features;
+            :func:`whiskerid.train_classifier` turns it on.
+        alias_slope: With ``deconvolve``: the weight ``(f/f_m)^α`` of a bin's aliases in
+            the whiskers' transfer functions (:attr:`WhiskerResponse.alias_slope`). 0, the
+            base motion flat across the aliases, by default so that model files written
+            before it existed keep their features; :func:`whiskerid.train_classifier` sets
+            :data:`whiskerid.classify.ALIAS_SLOPE`.
     """
 
     kind: FeatureKind = "fitted"
@@ -115,6 +130,8 @@ class FeatureSpec:
     cross_channel: bool = False
     window_fit: bool = False
     floor_match: bool = False
+    extend_edges: bool = False
+    alias_slope: float = 0.0
 
     def __post_init__(self):
         if self.kind not in FEATURE_KINDS:
@@ -134,6 +151,10 @@ class FeatureSpec:
                              f"not {self.channels} channels")  # fmt: skip
         if self.floor_match and not self.deconvolve:
             raise ValueError("floor_match needs whisker-aware features (deconvolve)")
+        if self.extend_edges and not self.deconvolve:
+            raise ValueError("extend_edges needs whisker-aware features (deconvolve)")
+        if not (np.isfinite(self.alias_slope) and self.alias_slope >= 0):
+            raise ValueError(f"alias_slope must be a number ≥ 0, not {self.alias_slope!r}")
         if self.cross_channel and self.channels != 2:
             raise ValueError("cross-channel features need exactly two channels")
 
@@ -185,7 +206,8 @@ class FeatureSpec:
         """This spec with its physical numbers (:class:`Numbers`) set to the defaults: what
         a compiled feature function depends on, and its cache key."""
         return replace(self, rate_hz=_DEFAULT.rate_hz, spatial_lo=_DEFAULT.spatial_lo,
-                       spatial_hi=_DEFAULT.spatial_hi)  # fmt: skip
+                       spatial_hi=_DEFAULT.spatial_hi,
+                       alias_slope=_DEFAULT.alias_slope)  # fmt: skip
 
     def numbers(self, whisker=None, reference=None) -> "Numbers":
         """The physical numbers of this spec, as float64 arrays (traced when jitted).
@@ -215,6 +237,8 @@ class FeatureSpec:
                 "calibrated whisker record)"
             )
         reference = whisker if reference is None else reference
+        whisker = replace(whisker, alias_slope=self.alias_slope)
+        reference = replace(reference, alias_slope=self.alias_slope)
         padded = np.fft.rfftfreq(2 * n, 1.0 / self.rate_hz)
         recolour = whisker.recolour(reference, padded, self.rate_hz)
         if not self.floor_match:
@@ -533,13 +557,69 @@ def window_features(spec: FeatureSpec, x, speed_mps=jnp.nan, numbers: Numbers | 
     return fitted_features(spec, x, speed_mps, numbers)
 
 
-def through_filter(xs, response):
+def through_filter(xs, response, extend: bool = False):
     """Windows ``(channels, n)`` through a per-bin channel matrix ``(bins, ch, ch)`` given
-    on the grid of a ``2n``-point FFT (zero-padded: a linear, not circular, filter).
-    The channels' means are removed first."""
+    on the grid of a ``2n``-point FFT. The channels' means are removed first.
+
+    Args:
+        xs: The windows.
+        response: The filter, per bin.
+        extend: Extend each window by half a window of its own continuation at each
+            end, tapered to zero (:func:`extend_window`), and keep the filtered middle; else
+            pad with zeros (a linear, not circular, filter of the window alone, which
+            steps at the window's edges).
+    """
     n = xs.shape[-1]
-    spec = jnp.fft.rfft(xs - jnp.mean(xs, axis=-1, keepdims=True), 2 * n, axis=-1)
-    return jnp.fft.irfft(jnp.einsum("bij,jb->ib", response, spec), 2 * n, axis=-1)[:, :n]
+    x = xs - jnp.mean(xs, axis=-1, keepdims=True)
+    lead = n // 2 if extend else 0
+    x = extend_window(x) if extend else x
+    spec = jnp.fft.rfft(x, 2 * n, axis=-1)
+    y = jnp.fft.irfft(jnp.einsum("bij,jb->ib", response, spec), 2 * n, axis=-1)
+    return y[:, lead : lead + n]
+
+
+#: Order of the linear predictor that extends a window at its edges (:func:`extend_window`):
+#: a few resonances' worth of poles.
+EXTEND_ORDER = 12
+#: Its ridge, relative to the mean diagonal of the normal equations: keeps the predictor's
+#: poles inside the unit circle on noisy windows.
+EXTEND_RIDGE = 1e-3
+
+
+def extend_window(x) -> jax.Array:
+    """Windows ``(channels, n)`` (zero mean) with ``m = n // 2`` samples added at each end,
+    shape ``(channels, n + 2m)``: each channel's continuation by a linear predictor of
+    order :data:`EXTEND_ORDER` fitted to the window itself (forward and backward, least
+    squares with a ridge), clipped to the window's largest magnitude and tapered to zero
+    by a half cosine. A whisker's window is a few lightly damped resonances, which such a
+    predictor carries on across the edge; through a ``2n``-point circular filter the
+    joins of the extension lie half a window from the window, where filters of a
+    whisker's response have rung down."""
+    n = x.shape[-1]
+    m, p = n // 2, min(EXTEND_ORDER, n // 4)
+    lags = jnp.arange(1, p + 1)[None, :]
+    fwd_rows = jnp.arange(p, n)[:, None] - lags  # x[t] from x[t−1] … x[t−p]
+    bwd_rows = jnp.arange(0, n - p)[:, None] + lags  # x[t] from x[t+1] … x[t+p]
+    taper = 0.5 * (1 + jnp.cos(jnp.pi * jnp.arange(1, m + 1) / (m + 1)))  # 1 → 0
+
+    def one(c):
+        a_mat = jnp.concatenate([c[fwd_rows], c[bwd_rows]])
+        b_vec = jnp.concatenate([c[p:], c[: n - p]])
+        gram = a_mat.T @ a_mat
+        ridge = EXTEND_RIDGE * jnp.trace(gram) / p + _EPS
+        coef = jnp.linalg.solve(gram + ridge * jnp.eye(p), a_mat.T @ b_vec)
+
+        def step(state, _):
+            nxt = state @ coef
+            return jnp.concatenate([nxt[None], state[:-1]]), nxt
+
+        _, after = jax.lax.scan(step, c[::-1][:p], None, length=m)
+        _, before = jax.lax.scan(step, c[:p], None, length=m)
+        lim = jnp.max(jnp.abs(c))
+        after, before = jnp.clip(after, -lim, lim), jnp.clip(before, -lim, lim)
+        return jnp.concatenate([(before * taper)[::-1], c, after * taper])
+
+    return jax.vmap(one)(x)
 
 
 def base_band_levels(base, rate_hz, edges) -> jax.Array:
@@ -618,14 +698,22 @@ def _cross_features(a, b):
 def _whisker_features(spec: FeatureSpec, x, speed_mps, num: Numbers):
     """Features with the whisker divided out and/or across channels (see the spec)."""
     xs = x if x.ndim == 2 else x[None]
-    plain = replace(spec, deconvolve=False, floor_match=False, cross_channel=False, channels=1)
+    plain = replace(
+        spec,
+        deconvolve=False,
+        floor_match=False,
+        extend_edges=False,
+        cross_channel=False,
+        channels=1,
+    )
     base = None
+    ext = spec.extend_edges
     if spec.deconvolve and spec.floor_match:
-        xs = through_filter(xs, num.recolour) + matched_noise(xs, num.dither)
-        base = through_filter(xs, num.to_base)
+        xs = through_filter(xs, num.recolour, ext) + matched_noise(xs, num.dither)
+        base = through_filter(xs, num.to_base, ext)
     elif spec.deconvolve:
-        xs = through_filter(xs, num.recolour)
-        base = through_filter(x if x.ndim == 2 else x[None], num.to_base)
+        xs = through_filter(xs, num.recolour, ext)
+        base = through_filter(x if x.ndim == 2 else x[None], num.to_base, ext)
     if spec.kind == "paper":
         return jax.vmap(paper_features)(xs).reshape(-1)
     parts = [jax.vmap(lambda c: fitted_features(plain, c, speed_mps, num))(xs).reshape(-1)]

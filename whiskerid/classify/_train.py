@@ -11,7 +11,7 @@ from ._features import FeatureSpec, compute_features
 from ._mlp import TrainConfig, default_config, train_mlp
 from ._model_file import ClassifierModel, recording_hashes
 from ._split import grouped_split
-from ._whisker import WhiskerResponse
+from ._whisker import ALIAS_SLOPE, WhiskerResponse
 
 
 def default_spec(
@@ -30,7 +30,8 @@ def default_spec(
     channels = ws.windows.shape[1] if ws.windows.ndim == 3 else 1
     if features == "paper":
         return FeatureSpec(kind="paper", rate_hz=ws.rate_hz, window=window, channels=channels,
-                           deconvolve=whisker, floor_match=whisker)  # fmt: skip
+                           deconvolve=whisker, floor_match=whisker, extend_edges=whisker,
+                           alias_slope=ALIAS_SLOPE if whisker else 0.0)  # fmt: skip
     use = ws.has_speed if use_speed is None else use_speed
     if use and not ws.has_speed:
         raise ValueError("speed features need speed_mps on every recording")
@@ -39,6 +40,7 @@ def default_spec(
     # with them; the synthetic set, where the speed is known: 1 point better).
     spec = FeatureSpec(kind="fitted", rate_hz=ws.rate_hz, window=window, octave_bands=use,
                        use_speed=use, channels=channels, deconvolve=whisker, floor_match=whisker,
+                       extend_edges=whisker, alias_slope=ALIAS_SLOPE if whisker else 0.0,
                        cross_channel=channels == 2, window_fit=window_fit)  # fmt: skip
     if use:
         df, nyq = ws.rate_hz / window, ws.rate_hz / 2

@@ -19,10 +19,15 @@ from a whisker record (and its ``[planes]`` table for two sensors) and gives two
   the identity, so a model trained on one whisker and run on another sees the windows it
   knows.
 
-Aliasing is accounted for in the magnitude: above Nyquist the base spectrum is taken as flat
-across the aliases of a bin (terrain acceleration spectra vary slowly there), so the
-effective gain is ``√(Σ_m |H(f_m)|²)`` over the aliases ``f_m`` of the bin, with the phase of
-the bin's own frequency.
+Aliasing is accounted for in the magnitude: the effective gain of a bin at ``f`` is
+``√(Σ_m |H(f_m)|² (f/f_m)^α)`` over its aliases ``f_m`` (``f`` itself included), with the
+phase of the bin's own frequency: the base acceleration's power is taken to fall as
+``f^−α`` across the aliases (``alias_slope``). With ``α = 0`` (flat) a whisker whose second
+mode folds into the band is credited with all of that mode's gain, as if the ground shook
+as hard at 200–400 Hz as in the band; the wheels filter the ground's profile, and base
+acceleration falls above the band (on the simulated terrains by 1–14 dB from 80 to 280 Hz),
+so the flat model makes such a whisker read its folded mode's bins too loud when recoloured
+to, and too quiet when divided out.
 """
 
 import tempfile
@@ -43,6 +48,9 @@ ALIASES = 4
 #: factors of the training whisker's, damping within these factors of its ζ.
 F1_SPAN = (0.6, 1.6)
 ZETA_SPAN = (0.5, 2.0)
+#: ``α`` of the aliases' weight ``(f/f_m)^α`` in models that weight them (see the module
+#: docstring): base acceleration power falling as ``1/f`` above the band.
+ALIAS_SLOPE = 1.0
 #: Regularisation of the inverse, relative to the largest gain: bins where the whisker's
 #: response is this far below its peak are not amplified further.
 REGULARISATION = 1e-3
@@ -85,11 +93,16 @@ class WhiskerResponse:
         record: The whisker record (its ``[planes]`` table for two sensors).
         amplifier: Gain of the sensors' amplifier on top of the record's Hall gain.
         channels: 1 (sensor A, vertical plane) or 2 (A vertical, B lateral).
+        alias_slope: ``α``: the aliases of a bin at ``f`` count with weight ``(f/f_m)^α``
+            (the base acceleration's power falling as ``f^−α``); 0, flat, by default
+            (models written before the weight existed). A model's feature settings set it
+            (:attr:`FeatureSpec.alias_slope`).
     """
 
     record: WhiskerRecord
     amplifier: float = 1.0
     channels: int = 1
+    alias_slope: float = 0.0
 
     def __post_init__(self):
         if self.channels not in (1, 2):
@@ -99,6 +112,8 @@ class WhiskerResponse:
             )
         if not (np.isfinite(self.amplifier) and self.amplifier > 0):
             raise ValueError(f"amplifier {self.amplifier!r} must be a positive number")
+        if not (np.isfinite(self.alias_slope) and self.alias_slope >= 0):
+            raise ValueError(f"alias_slope {self.alias_slope!r} must be a number ≥ 0")
 
     def transfer(self, freqs_hz, rate_hz: float) -> np.ndarray:
         """``T(f)`` in codes per m/s², shape ``(bins, channels, channels)`` (aliasing in the
@@ -112,10 +127,11 @@ class WhiskerResponse:
         # the bins' own frequencies
         fm = np.abs(f[None, :] + np.arange(-ALIASES, ALIASES + 1)[:, None] * rate_hz)
         avg = averaging_response(fm.ravel(), adc.conversion_time_s, adc.averaging_points)
+        weight = (np.maximum(f, 1e-3)[None, :] / np.maximum(fm, 1e-3)) ** self.alias_slope
         per_plane = []
         for w in whiskers:
             h = (deflection_per_acc(w, fm.ravel()) * avg).reshape(fm.shape)
-            power = np.sum(np.abs(h) ** 2, axis=0)
+            power = np.sum(np.abs(h) ** 2 * weight, axis=0)
             per_plane.append(np.sqrt(power) * np.exp(1j * np.angle(h[ALIASES])))
         gains = np.array([float(h.gain_v_per_m) for h in halls]) / adc.lsb_v
         mix = planes.mixing()[: self.channels, : self.channels]
@@ -144,8 +160,7 @@ class WhiskerResponse:
             lat = np.minimum(np.asarray(planes.lateral_zeta, dtype=float) * zeta_factor, 0.9)
             extra["planes"] = {**planes.to_table(), "lateral_zeta": lat.tolist()}
         zeta_v = float(zeta) if zeta.ndim == 0 else tuple(float(z) for z in zeta)
-        return WhiskerResponse(rec.replace(structure=stiffer, zeta=zeta_v, extra=extra),
-                               self.amplifier, self.channels)  # fmt: skip
+        return replace(self, record=rec.replace(structure=stiffer, zeta=zeta_v, extra=extra))
 
     def floor_gain(self, freqs_hz, rate_hz: float) -> np.ndarray:
         """``G(f)``: per channel, how far the whiskers of a span around this one
