@@ -1,5 +1,5 @@
-"""Test configuration: float64 everywhere (the models need it), compiled code freed per module,
-quick compilation.
+"""Test configuration: float64 everywhere (the models need it), compiled code freed after each
+test, quick compilation.
 
 The tests compile hundreds of small programs that each run for milliseconds: compiling them
 dominates the suite's time, so LLVM's optimisation of the generated machine code is turned down
@@ -9,7 +9,7 @@ changes is how fast their machine code runs, which the tests do not measure (res
 in the last bits, far below any test's tolerance).
 
 JAX's persistent compilation cache points at a folder made for this run (removed at its end):
-a module whose compiled code was freed loads what an earlier module compiled instead of
+a test whose compiled code was freed loads what an earlier test compiled instead of
 compiling it again, and with ``pytest -n 2`` (pytest-xdist) one worker loads what the other
 compiled. Nothing is kept between runs, so every run is a cold start.
 """
@@ -46,12 +46,13 @@ def pytest_sessionfinish(session, exitstatus):
         shutil.rmtree(_CACHE, ignore_errors=True)
 
 
-@pytest.fixture(autouse=True, scope="module")
+@pytest.fixture(autouse=True)
 def _free_compiled_code():
-    """Drop JAX's compiled executables after each test module.
+    """Drop JAX's compiled executables after each test.
 
-    Every module compiles its own problem shapes; kept for the whole session they add up to
-    gigabytes, while a later module rarely reuses them (and then finds them in the cache above).
+    Every test compiles its own problem shapes; kept, they add up (a module's tests to a
+    gigabyte), while the next test rarely reuses them, and then loads them from the
+    compilation cache above in a fraction of the time compiling took.
     """
     yield
     jax.clear_caches()
