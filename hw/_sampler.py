@@ -88,9 +88,11 @@ class Sampler:
     Deadlines are computed from the start time and the slot index with exact rational
     arithmetic, never by accumulating sleeps, so the mean rate does not drift however long it
     runs. When a deadline has already passed (a read or the OS took too long) the overrun is
-    counted and the sampler moves on to the next deadline still in the future: no burst of
-    catch-up reads. A read that fails (an exhausted I2C retry, a conversion timeout, or any
-    other exception the bus raises) counts as a gap and the stream continues.
+    counted; the latest slot already due is read at once if it is less than half a slot
+    late (its timestamp is the real one), else the sampler moves on to the next deadline
+    still in the future: the slots in between are skipped, never read in a burst. A read
+    that fails (an exhausted I2C retry, a conversion timeout, or any other exception the bus
+    raises) counts as a gap and the stream continues.
 
     Args:
         adc: Object with ``read() -> code`` and ``to_volts(code) -> volts``.
@@ -141,6 +143,15 @@ class Sampler:
         assert self.t0_ns is not None
         return -((-(now_ns - self.t0_ns) * self._den) // self._num)
 
+    def _catch_up(self, now_ns: int) -> int:
+        """The slot to read after an overrun: the latest one already due, at once, if it
+        is less than half a slot late (a short stall costs no sample, only a late
+        timestamp), else the next one still to come (never reads back to back)."""
+        latest = self._first_slot_from(now_ns) - 1
+        if 2 * (now_ns - self.deadline_ns(latest)) * self._den < self._num:
+            return latest
+        return latest + 1
+
     def stop(self) -> None:
         """Ask a running :meth:`samples` / :meth:`run` loop to return before its next slot."""
         self._stop = True
@@ -178,8 +189,7 @@ class Sampler:
                 return
             now = self._clock()
             if k > 0 and now > deadline:
-                # Late: skip to the next future deadline instead of reading back to back.
-                k_next = self._first_slot_from(now)
+                k_next = self._catch_up(now)
                 self.stats.overruns += 1
                 self.stats.skipped_slots += k_next - k
                 k = k_next

@@ -47,13 +47,26 @@ def pytest_sessionfinish(session, exitstatus):
 
 
 @pytest.fixture(autouse=True)
-def _free_compiled_code():
+def _free_compiled_code(request):
     """Drop JAX's compiled executables after each test.
 
     Every test compiles its own problem shapes; kept, they add up (a module's tests to a
     gigabyte), while the next test rarely reuses them, and then loads them from the
-    compilation cache above in a fraction of the time compiling took.
+    compilation cache above in a fraction of the time compiling took. A module that checks
+    what stays compiled from one test to the next sets ``KEEP_COMPILED = True``: its code is
+    freed when the module ends.
     """
     yield
+    if not getattr(request.module, "KEEP_COMPILED", False):
+        _free()
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _free_compiled_code_of_the_module():
+    yield
+    _free()
+
+
+def _free():
     jax.clear_caches()
     gc.collect()

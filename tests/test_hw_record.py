@@ -120,8 +120,12 @@ def test_a_lost_slot_drops_its_round_and_rows_stay_whole():
             rows.append(r)
     assert sampler.stats.gaps == 1 and rounds.incomplete >= 1
     assert len(rows) == 20 - rounds.incomplete
-    for times, codes in rows:  # every row is one round: A0 then A1 2.5 ms later
-        assert times[1] - times[0] == pytest.approx(2.5e-3, abs=1e-5)
+    # Every row is one round: A0 then A1 a slot (2.5 ms) later; the slot after the failed
+    # read's retries may be read late, by under half a slot, with its real timestamp.
+    lags = np.array([times[1] - times[0] for times, _ in rows])
+    assert np.all((lags > 1.25e-3) & (lags < 3.75e-3))
+    assert np.count_nonzero(np.abs(lags - 2.5e-3) < 1e-5) >= len(rows) - 1
+    for _, codes in rows:
         assert codes == pytest.approx([1.0 / 4.096 * 32768, 2.0 / 4.096 * 32768], abs=2)
 
 

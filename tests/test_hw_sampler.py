@@ -88,21 +88,28 @@ def test_deadlines_are_exact_for_a_period_that_is_not_whole_nanoseconds():
     assert sampler.deadline_ns(3) == 10_000_000
 
 
-def test_overrun_is_counted_and_schedule_skips_ahead_without_burst():
+@pytest.mark.parametrize(
+    ("stall_s", "read_late", "skipped"),
+    [(0.012, True, 1), (0.014, False, 2)],
+    ids=["less-than-half-a-slot-late", "more"],
+)
+def test_overrun_is_counted_and_schedule_skips_ahead_without_burst(stall_s, read_late, skipped):
     clock = FakeClock()
-    adc = TimedADC(clock, lambda i: 0.012 if i == 10 else 0.001)
+    adc = TimedADC(clock, lambda i: stall_s if i == 10 else 0.001)
     sampler = Sampler(adc, 200.0, clock=clock.now_ns, sleep=clock.sleep)
     t = np.array([s.t_s for s in sampler.samples(n=30)])
-    # Read 10 starts at 50 ms and ends at 62 ms: slots 11 (55) and 12 (60) are gone; the next
-    # read is at slot 13 (65 ms), not immediately.
+    # Read 10 starts at 50 ms and ends at 62 (64) ms: slots 11 (55) and 12 (60) are due.
+    # Slot 12 is 2 ms late, under half a slot: read at once; 4 ms late: skipped too, and
+    # the next read is at slot 13 (65 ms), not immediately.
     assert sampler.stats.overruns == 1
-    assert sampler.stats.skipped_slots == 2
-    half_read = np.where(np.arange(30) == 10, 0.006, 0.0005)  # timestamps are read midpoints
-    slots = (t - half_read) / 0.005
-    np.testing.assert_allclose(slots, np.rint(slots), atol=1e-6)
-    expected = list(range(11)) + list(range(13, 32))
-    np.testing.assert_array_equal(np.rint(slots).astype(int), expected)
-    assert np.min(np.diff(t - half_read)) >= 0.005 - 1e-9  # no back-to-back catch-up reads
+    assert sampler.stats.skipped_slots == skipped
+    start = t - np.where(np.arange(30) == 10, stall_s / 2, 0.0005)  # read midpoints
+    expected = list(range(11)) + ([12] if read_late else []) + list(range(13, 32))
+    expected = np.array(expected[:30]) * 0.005
+    if read_late:  # slot 12 starts when read 10 ends
+        expected[11] = 0.050 + stall_s
+    np.testing.assert_allclose(start, expected, atol=1e-9)
+    assert np.min(np.diff(start)) >= 0.003 - 1e-9  # never back to back
 
 
 def test_read_that_ends_exactly_on_the_next_deadline_is_not_an_overrun():
