@@ -11,10 +11,12 @@ Each fit gets its own status, decided as :func:`whiskerid.fit.calibrate` decides
 that fails to converge or gives non-finite numbers marks only its own lane. Only the values
 that change detection needs are kept (f_1, ζ and their 1σ from ``s²(JᵀJ)⁻¹``); the status
 follows calibrate's rules: ``ok`` when converged with a finite covariance, ``poor fit`` when
-the model explains little of the signal, ``check`` when a check of
-:func:`whiskerid.fit._checks.check_fit` fails. Unlike calibrate, the fit is not solved a
-second time after the recording's residual scale is known: for one recording that scale is
-one factor on every residual, which leaves the optimum and ``s²(JᵀJ)⁻¹`` unchanged.
+the model explains little of the signal, ``check`` when one of calibrate's checks of a
+converged fit fails (correlated residuals, a line left in them, ζ at a bound or implausible,
+f_1 far from the record's, imprecise values, mode 1 silent). Unlike calibrate, the fit is
+not solved a second time after the recording's residual scale is known: for one recording
+that scale is one factor on every residual, which leaves the optimum and ``s²(JᵀJ)⁻¹``
+unchanged.
 """
 
 from dataclasses import dataclass
