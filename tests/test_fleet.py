@@ -5,6 +5,7 @@ Three whiskers × three sessions × two plucks (one file each), from
 with ζ × 1.5 from its last session on, and a session holding a corrupt file.
 """
 
+import dataclasses
 import json
 import math
 import shutil
@@ -16,9 +17,11 @@ import numpy as np
 import pytest
 
 from whiskerid.cli import main
+from whiskerid.fit import calibrate, calibrate_each, observations_from_recording
 from whiskerid.fleet import (
     COLUMNS,
     LayoutError,
+    bucket_length,
     calibrate_fleet,
     check_fleet,
     discover,
@@ -26,6 +29,8 @@ from whiskerid.fleet import (
     read_table,
     simulate_fleet,
 )
+from whiskerid.io import read_recording
+from whiskerid.model import load_record
 
 _COMPILES: list[str] = []
 
@@ -95,6 +100,39 @@ def test_sessions_of_one_shape_compile_once(fleet):
     # later sessions are other whiskers' plucks of the lengths already compiled
     counts = fleet["compiles"]
     assert counts[0] > 0 and counts[1:] == [0] * 9, counts
+
+
+def _plucks(root, whisker, sessions):
+    """The plucks of a whisker's sessions as the fleet fits them (cut to their bucket)."""
+    record = load_record(root / whisker / "whisker.toml")
+    out = []
+    for s in sessions:
+        for path in sorted((root / whisker / s).glob("*.csv")):
+            for o in observations_from_recording(read_recording(path), record):
+                n = bucket_length(o.t.size)
+                out.append(dataclasses.replace(o, t=o.t[:n], y=o.y[:n]))
+    return record, out
+
+
+def test_batched_plucks_match_calibrate_and_a_bad_one_fails_alone(fleet):
+    record, good = _plucks(fleet["root"], "whisker-002", ["session-00", "session-01"])
+    rng = np.random.default_rng(3)
+    noise = dataclasses.replace(good[0], y=rng.normal(size=good[0].y.size), name="noise")
+    flat = dataclasses.replace(good[1], y=np.full(good[1].y.size, 7.0), name="flat")
+    fits = calibrate_each([(record, o) for o in [good[0], noise, *good[1:], flat]])
+    fit_noise, fit_flat = fits.pop(1), fits.pop()
+    assert fit_flat.status == "error" and "constant" in fit_flat.message
+    # the batch solves what calibrate solves, from its start values; both stop where a step
+    # is below 1e-10 of the parameters, on paths of their own (calibrate solves twice)
+    for o, fit in zip(good, fits, strict=True):
+        cal = calibrate(record, [o])
+        assert fit.status == cal.status and fit.status in ("ok", "check"), o.name
+        assert fit.f1_hz == pytest.approx(cal.params["f1_hz"]["value"], rel=1e-7)
+        assert fit.zeta == pytest.approx(cal.params["zeta"]["value"], rel=1e-6)
+        assert fit.f1_std == pytest.approx(cal.params["f1_hz"]["std"], rel=1e-4)
+    # noise has no optimum worth comparing, only the verdict
+    assert fit_noise.status == calibrate(record, [noise]).status
+    assert fit_noise.status not in ("ok", "check")
 
 
 def test_rerun_fits_only_what_is_new(fleet, tmp_path):

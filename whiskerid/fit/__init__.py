@@ -11,6 +11,11 @@ covariance.
 
 from .. import _jax_setup as _jax_setup
 from ..io import sha256_of as sha256_of  # where fit's users found it before
+from ._batch import BATCH_LANES as BATCH_LANES
+from ._batch import PluckFit as PluckFit
+from ._batch import calibrate_each as calibrate_each
+from ._batch import problem_shape as problem_shape
+from ._batch import stack_problems as stack_problems
 from ._calibrate import GTOL as GTOL
 from ._calibrate import Calibration as Calibration
 from ._calibrate import calibrate as calibrate

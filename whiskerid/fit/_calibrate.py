@@ -42,6 +42,8 @@ from pathlib import Path
 from typing import Any
 
 import equinox as eqx
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from .._choices import PINS
@@ -154,6 +156,7 @@ def calibrate(
     solver: str = "levenberg-marquardt",
     max_steps: int = 400,
     f1_start_hz: float | None = None,
+    start: dict | None = None,
 ) -> Calibration:
     """Fit κ (f_1), ζ and the nuisances to one or more recordings (and a static test).
 
@@ -170,6 +173,9 @@ def calibrate(
         solver: ``levenberg-marquardt`` (default), ``dogleg`` or ``gauss-newton``.
         max_steps: Solver step limit.
         f1_start_hz: Override the nominal f_1 the start search is centred on.
+        start: Start parameters instead of the start search: a pytree of the problem's
+            structure (``FitProblem.zero_params()``), e.g. from earlier fits of the same
+            recordings.
 
     Returns:
         A :class:`Calibration`; never raises on a failed solve (see ``status``).
@@ -187,7 +193,10 @@ def calibrate(
         record, obs, static=static, n_modes=n_modes, zeta_per_mode=zeta_per_mode, pin=pin
     )
     # Start: grid over (κ, ζ) with the linear coefficients solved exactly.
-    theta0 = start_values(problem, obs, nominal, f1_hz=f1_start_hz)
+    if start is None:
+        theta0 = start_values(problem, obs, nominal, f1_hz=f1_start_hz)
+    else:
+        theta0 = jax.tree_util.tree_map(jnp.asarray, start)
     res = solve(problem, theta0, solver=solver, max_steps=max_steps)
     # Weight each block (recording, static test) by its own residual scale, then refit:
     # the blocks are then combined fairly and s² ≈ 1 (a reduced χ²).

@@ -18,6 +18,7 @@ from ._calibrate import bucket_length as bucket_length
 from ._calibrate import calibrate_fleet as calibrate_fleet
 from ._calibrate import fit_session as fit_session
 from ._calibrate import fit_sessions as fit_sessions
+from ._calibrate import iter_fit_sessions as iter_fit_sessions
 from ._calibrate import local_runner as local_runner
 from ._calibrate import read_table as read_table
 from ._calibrate import session_key as session_key

@@ -16,10 +16,14 @@ record and the settings (so the same numbers come out in this process or on a cl
   constants) holds over nine tenths of its information (which goes as the squared
   amplitude) in its first half, so little is lost;
 * each pluck is calibrated on its own (its f_1 and ζ give the within-session spread that
-  change detection needs), and all plucks of the session jointly (shared f_1 and ζ, their
-  own nuisances; plucks ordered by length so that sessions of the same lengths share one
-  compiled program): the joint fit gives the session's values, their 1σ (white noise or
-  HAC, as :func:`whiskerid.fit.calibrate` reports) and its calibration record.
+  change detection needs): the plucks of many sessions at once, those of one bucket in one
+  batched program (:func:`whiskerid.fit.calibrate_each`, from the start values calibrate
+  would use, a status per pluck);
+* all plucks of the session are then calibrated jointly (shared f_1 and ζ, their own
+  nuisances; plucks ordered by length so that sessions of the same lengths share one
+  compiled program), starting from the single plucks' values when they agree (else from
+  its own start search): the joint fit gives the session's values, their 1σ (white noise
+  or HAC, as :func:`whiskerid.fit.calibrate` reports) and its calibration record.
 
 :func:`calibrate_fleet` finds the sessions (:func:`whiskerid.fleet.discover`), skips those
 already done with the same data, record and settings (a session's *key* is the SHA-256 of its
@@ -48,7 +52,9 @@ import numpy as np
 from .._version import __version__
 from ..fit import (
     CalibrationError,
+    PluckFit,
     calibrate,
+    calibrate_each,
     check_sampling,
     observations_from_recording,
     sha256_of,
@@ -162,9 +168,9 @@ def _observations(files, record, settings: FleetSettings) -> list:
     return [_bucketed(o) for o in kept]
 
 
-def _fit(record, obs, settings):
+def _fit(record, obs, settings, start=None):
     return calibrate(record, obs, n_modes=settings.n_modes, pin=settings.pin,
-                     solver=settings.solver)  # fmt: skip
+                     solver=settings.solver, start=start)  # fmt: skip
 
 
 def _value(cal, name):
@@ -192,6 +198,46 @@ def fit_session(session: Session, settings: FleetSettings, key: str = "") -> dic
         ``{"row": ..., "record_toml": ...}``: the table row (:data:`COLUMNS`) and the joint
         fit's calibration record as TOML text (None when nothing was fitted).
     """
+    return fit_sessions([session], settings, [key])[0]
+
+
+def fit_sessions(sessions: list[Session], settings: FleetSettings, keys: list[str]) -> list[dict]:
+    """:func:`fit_session` of several sessions, their single plucks batched (one task of a
+    cluster; see :func:`iter_fit_sessions`)."""
+    return list(iter_fit_sessions(sessions, settings, keys))
+
+
+#: Sessions whose single plucks are fitted in one batch: the local run and each task of a
+#: cluster take the same chunks, so that every fit sees the same batches either way.
+SESSION_CHUNK = 16
+
+
+def iter_fit_sessions(sessions: list[Session], settings: FleetSettings, keys: list[str]):
+    """Fit the sessions, yielding each result (as :func:`fit_session`) when it is done.
+
+    Every session is read first; the single plucks of all of them are then calibrated
+    together, fits of one shape in one batched program
+    (:func:`whiskerid.fit.calibrate_each`); then each session's joint fit starts from its
+    single plucks' values.
+    """
+    prepared = [_prepare(s, settings, k) for s, k in zip(sessions, keys, strict=True)]
+    singles = _singles(prepared, settings)
+    for prep, fits in zip(prepared, singles, strict=True):
+        yield _finish(prep, fits, settings)
+
+
+@dataclass
+class _Prepared:
+    session: Session
+    key: str
+    row: dict
+    record: object = None
+    obs: list | None = None
+    seconds: float = 0.0
+
+
+def _prepare(session: Session, settings: FleetSettings, key: str) -> _Prepared:
+    """Read the session's files and record (a bad one gives the row's status)."""
     t0 = time.perf_counter()
     row = {c: "" for c in COLUMNS}
     row.update(whisker=session.whisker, session=session.session, key=key,
@@ -201,38 +247,100 @@ def fit_session(session: Session, settings: FleetSettings, key: str = "") -> dic
         row["record_sha256"] = sha256_of(session.record)
     except OSError:
         pass  # reported below, where the files are read
-    toml_text = None
+    prep = _Prepared(session, key, row)
     try:
-        record = load_record(session.record)
-        obs = _observations(session.files, record, settings)
+        prep.record = load_record(session.record)
+        prep.obs = _observations(session.files, prep.record, settings)
     except (RecordingError, CalibrationError, RecordError, OSError, ValueError) as err:
         row.update(status="bad data", checks=" ".join(str(err).split()), n_plucks=0)
-        obs = None
-    if obs is not None:
+        prep.obs = None
+    except Exception as err:  # one session's failure must never stop the others
+        row.update(status="error", checks=" ".join(str(err).split()) or type(err).__name__)
+        prep.obs = None
+    prep.seconds = time.perf_counter() - t0
+    return prep
+
+
+def _singles(prepared: list[_Prepared], settings: FleetSettings) -> list[list | None]:
+    """Each session's single-pluck fits (:class:`whiskerid.fit.PluckFit`), batched; a
+    session whose plucks break the batch is fitted alone, so it cannot spoil the others."""
+    todo = [p for p in prepared if p.obs is not None]
+    out: dict[int, list | Exception] = {}
+    t0 = time.perf_counter()
+    try:
+        fits = _calibrate_each(todo, settings)
+        for p in todo:
+            out[id(p)], fits = fits[: len(p.obs)], fits[len(p.obs) :]
+    except Exception:
+        for p in todo:
+            try:
+                out[id(p)] = _calibrate_each([p], settings)
+            except Exception as err:
+                out[id(p)] = err
+    share = (time.perf_counter() - t0) / max(sum(len(p.obs) for p in todo), 1)
+    for p in todo:
+        p.seconds += share * len(p.obs)
+    return [out.get(id(p)) for p in prepared]
+
+
+def _calibrate_each(prepared: list[_Prepared], settings: FleetSettings):
+    items = [(p.record, o) for p in prepared for o in p.obs]
+    return calibrate_each(items, n_modes=settings.n_modes, pin=settings.pin,
+                          solver=settings.solver)  # fmt: skip
+
+
+def _finish(prep: _Prepared, singles, settings: FleetSettings) -> dict:
+    t0 = time.perf_counter()
+    row, toml_text = prep.row, None
+    if prep.obs is not None:
         try:
-            row, toml_text = _fit_plucks(session, settings, key, record, obs, row)
+            if isinstance(singles, Exception):
+                raise singles
+            row, toml_text = _fit_plucks(prep, singles, settings)
         except Exception as err:  # one session's failure must never stop the others
             row.update(status="error", checks=" ".join(str(err).split()) or type(err).__name__)
     row["fitted_at"] = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
-    row["fit_s"] = f"{time.perf_counter() - t0:.3f}"
+    row["fit_s"] = f"{prep.seconds + time.perf_counter() - t0:.3f}"
     return {"row": row, "record_toml": toml_text}
 
 
-def _fit_plucks(session, settings, key, record, obs, row):
-    singles = [_fit(record, [o], settings) for o in obs] if len(obs) > 1 else []
-    joint = _fit(record, sorted(obs, key=lambda o: -o.t.size), settings)
-    singles = singles or [joint]
+def _joint_start(obs, singles):
+    """Start values of the joint fit from the single plucks' fits (in ``obs``'s order), or
+    None (the joint fit then searches its own) when a pluck has no usable fit or the plucks
+    disagree on f_1 (one of them may be a spurious window the joint fit must judge)."""
+    if any(s.status not in USABLE for s in singles):
+        return None
+    f1 = np.array([s.f1_hz for s in singles])
+    if not np.all(np.abs(f1 / np.median(f1) - 1) <= OUTLIER_F1):
+        return None
+    theta = {k: np.median([np.asarray(s.optimum[k]) for s in singles], axis=0)
+             for k in ("log_kappa", "zeta_u")}  # fmt: skip
+    by_obs = {id(o): s for o, s in zip(obs, singles, strict=True)}
+    return theta, by_obs
+
+
+def _fit_plucks(prep: _Prepared, singles, settings):
+    session, key, record, obs, row = prep.session, prep.key, prep.record, prep.obs, prep.row
+    ordered = sorted(obs, key=lambda o: -o.t.size)
+    start = _joint_start(obs, singles)
+    if start is not None:
+        theta, by_obs = start
+        theta["recs"] = [by_obs[id(o)].optimum["recs"][0] for o in ordered]
+        start = theta
+    joint = _fit(record, ordered, settings, start=start)
     f1, f1_std = _value(joint, "f1_hz")
     zeta, zeta_std = _value(joint, "zeta")
-    f1_k = [_value(c, "f1_hz")[0] for c in singles]
-    zeta_k = [_value(c, "zeta")[0] for c in singles]
+    if len(obs) == 1:  # one pluck: its own fit is the joint one
+        singles = [PluckFit(joint.status, f1, zeta)]
+    f1_k = [s.f1_hz for s in singles]
+    zeta_k = [s.zeta for s in singles]
     # A pluck far from the session's f_1 is not a repeat of it (a spurious window, a higher
     # mode taken for the first): it is kept out of the spread, marked "outlier".
     status_k = [
-        "outlier" if c.status in USABLE and not abs(f / f1 - 1) <= OUTLIER_F1 else c.status
-        for c, f in zip(singles, f1_k, strict=True)
+        "outlier" if s.status in USABLE and not abs(s.f1_hz / f1 - 1) <= OUTLIER_F1 else s.status
+        for s in singles
     ]
-    usable = [c for c, s in zip(singles, status_k, strict=True) if s in USABLE]
+    usable = [s for s, st in zip(singles, status_k, strict=True) if st in USABLE]
     sd = lambda v: float(np.std(v, ddof=1)) if len(v) > 1 else math.nan  # noqa: E731
     row.update(
         status=joint.status,
@@ -245,8 +353,8 @@ def _fit_plucks(session, settings, key, record, obs, row):
         n_plucks=len(obs),
         f1_plucks=_join(f1_k),
         zeta_plucks=_join(zeta_k),
-        f1_pluck_sd=f"{sd([_value(c, 'f1_hz')[0] for c in usable]):.4g}",
-        zeta_pluck_sd=f"{sd([_value(c, 'zeta')[0] for c in usable]):.4g}",
+        f1_pluck_sd=f"{sd([s.f1_hz for s in usable]):.4g}",
+        zeta_pluck_sd=f"{sd([s.zeta for s in usable]):.4g}",
         pluck_status=";".join(status_k),
     )
     out = joint.record
@@ -256,24 +364,20 @@ def _fit_plucks(session, settings, key, record, obs, row):
         "session": session.session,
         "key": key,
         "settings": {k: v for k, v in asdict(settings).items() if v is not None},
+        "joint_start": "single plucks" if start is not None else "start search",
         "plucks": [
             {
                 "name": o.name,
                 "n_samples": int(o.t.size),
-                "status": c.status,
-                "f1_hz": _value(c, "f1_hz")[0],
-                "zeta": _value(c, "zeta")[0],
+                "status": s.status,
+                "f1_hz": s.f1_hz,
+                "zeta": s.zeta,
             }
-            for o, c in zip(obs, singles, strict=True)
+            for o, s in zip(obs, singles, strict=True)
         ],
     }
     out = out.replace(extra={**out.extra, "fit": fit})
     return row, out.to_toml()
-
-
-def fit_sessions(sessions: list[Session], settings: FleetSettings, keys: list[str]) -> list[dict]:
-    """:func:`fit_session` of several sessions, in order (one task of a cluster)."""
-    return [fit_session(s, settings, k) for s, k in zip(sessions, keys, strict=True)]
 
 
 # --------------------------------------------------------------------------- the table
@@ -438,6 +542,8 @@ def calibrate_fleet(
 
 
 def local_runner(sessions: list[Session], settings: FleetSettings, keys: list[str]):
-    """Fit the sessions one after another in this process (yields each result)."""
-    for s, k in zip(sessions, keys, strict=True):
-        yield fit_session(s, settings, k)
+    """Fit the sessions in this process, :data:`SESSION_CHUNK` at a time (yields each
+    result)."""
+    for i in range(0, len(sessions), SESSION_CHUNK):
+        chunk = slice(i, i + SESSION_CHUNK)
+        yield from iter_fit_sessions(sessions[chunk], settings, keys[chunk])

@@ -2,19 +2,19 @@
 "whiskerid[fleet]"``).
 
 Each task fits a chunk of sessions with :func:`whiskerid.fleet.fit_sessions`, the very
-function the local run uses, so the numbers are the same either way. The workers read the
-recordings by path (on a cluster of several machines the fleet's folder must be mounted at
-the same path on each); the results come back to this process, which alone writes the
-records and the table.
+function and the same chunks the local run uses, so the numbers are the same either way. The
+workers read the recordings by path (on a cluster of several machines the fleet's folder
+must be mounted at the same path on each); the results come back to this process, which
+alone writes the records and the table.
 """
 
 from collections.abc import Iterator
 
-from ._calibrate import FleetSettings, fit_sessions
+from ._calibrate import SESSION_CHUNK, FleetSettings, fit_sessions
 from ._layout import Session
 
 
-def ray_runner(address: str = "auto", *, num_cpus: int | None = None, chunk: int = 4):
+def ray_runner(address: str = "auto", *, num_cpus: int | None = None, chunk: int = SESSION_CHUNK):
     """A runner for :func:`whiskerid.fleet.calibrate_fleet` that uses Ray.
 
     Args:
@@ -22,8 +22,9 @@ def ray_runner(address: str = "auto", *, num_cpus: int | None = None, chunk: int
             ``local`` (a private cluster on this machine, stopped at the end) or a cluster's
             address (``ray://host:10001`` or ``host:6379``).
         num_cpus: Workers of a ``local`` cluster (all cores by default).
-        chunk: Sessions per task (fewer tasks, less overhead; each worker compiles its
-            programs once).
+        chunk: Sessions per task (their single plucks are fitted in one batch; each worker
+            compiles its programs once). With the default, the local run's chunks, the
+            tables of both are the same to the last digit.
 
     Raises:
         RuntimeError: Ray is not installed.
