@@ -1,5 +1,5 @@
-"""Test configuration: float64 everywhere (the models need it), compiled code freed after each
-test, quick compilation.
+"""Test configuration: float64 everywhere (the models need it), compiled code freed when a
+process grows large, quick compilation.
 
 The tests compile hundreds of small programs that each run for milliseconds: compiling them
 dominates the suite's time, so LLVM's optimisation of the generated machine code is turned down
@@ -9,7 +9,7 @@ changes is how fast their machine code runs, which the tests do not measure (res
 in the last bits, far below any test's tolerance).
 
 JAX's persistent compilation cache points at a folder made for this run (removed at its end):
-a test whose compiled code was freed loads what an earlier test compiled instead of
+a test after compiled code was freed loads what an earlier test compiled instead of
 compiling it again, and with ``pytest -n 2`` (pytest-xdist) one worker loads what the other
 compiled. Nothing is kept between runs, so every run is a cold start.
 """
@@ -46,18 +46,25 @@ def pytest_sessionfinish(session, exitstatus):
         shutil.rmtree(_CACHE, ignore_errors=True)
 
 
+#: A test process holding more than this after a test frees JAX's compiled code (bytes).
+FREE_ABOVE_BYTES = 600 * 2**20
+
+
 @pytest.fixture(autouse=True)
 def _free_compiled_code(request):
-    """Drop JAX's compiled executables after each test.
+    """Drop JAX's compiled executables after a test when the process has grown large.
 
     Every test compiles its own problem shapes; kept, they add up (a module's tests to a
-    gigabyte), while the next test rarely reuses them, and then loads them from the
-    compilation cache above in a fraction of the time compiling took. A module that checks
-    what stays compiled from one test to the next sets ``KEEP_COMPILED = True``: its code is
-    freed when the module ends.
+    gigabyte), while later tests rarely reuse them, and then load them from the compilation
+    cache above. Freeing after every test would trace again what neighbouring tests share, so
+    it happens when the process passes :data:`FREE_ABOVE_BYTES`, and after each module. A
+    module that checks what stays compiled between its tests sets ``KEEP_COMPILED = True``.
     """
     yield
-    if not getattr(request.module, "KEEP_COMPILED", False):
+    if getattr(request.module, "KEEP_COMPILED", False):
+        return
+    rss = _resident_bytes()
+    if rss is None or rss > FREE_ABOVE_BYTES:
         _free()
 
 
@@ -65,6 +72,15 @@ def _free_compiled_code(request):
 def _free_compiled_code_of_the_module():
     yield
     _free()
+
+
+def _resident_bytes() -> int | None:
+    """This process's resident memory, or None where ``/proc`` does not tell it."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError):
+        return None
 
 
 def _free():

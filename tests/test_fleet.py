@@ -32,6 +32,8 @@ from whiskerid.fleet import (
 from whiskerid.io import read_recording
 from whiskerid.model import load_record
 
+#: The module's tests check what stays compiled from the fixture's run to theirs.
+KEEP_COMPILED = True
 _COMPILES: list[str] = []
 
 
