@@ -151,6 +151,8 @@ def run(args) -> dict:
                           duration_s=args.duration, i2c_bus=args.i2c_bus,
                           replay=None if args.replay is None else str(args.replay),
                           seed=args.seed)  # fmt: skip
+    # Made here even when a sampling process replays the recording itself: a recording
+    # without the inputs' columns is then refused at once, before anything starts.
     sources = _sources(hw, args, inputs, replayed)
     sampler = bus = None
     if args.simulate is None and not args.fast:
