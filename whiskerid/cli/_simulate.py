@@ -96,9 +96,7 @@ def add_parser(sub) -> None:
 
 def run(args) -> dict:
     """Simulate, write the CSV (and the plot); returns the JSON summary."""
-    import numpy as np
 
-    from ..io import write_csv
     from ..model import simulate
 
     check_outputs({"--out": args.out, "--plot": args.plot},
@@ -107,9 +105,7 @@ def run(args) -> dict:
     if args.channels == 2:
         return _run_planes(args, record)
     base = None
-    if args.excitation == "base":
-        if args.base is None:
-            raise CommandError("--excitation base needs --base FILE (time and base acceleration)")
+    if _base_given(args):
         base = _read_base_motion(args.base, args.base_col)
     sim = simulate(
         record,
@@ -126,38 +122,12 @@ def run(args) -> dict:
         jitter_s=args.jitter,
         seed=args.seed,
     )
-    write_csv(args.out, sim)
-    say(f"wrote {args.out} ({sim.t.size} samples of {args.observable})")
-    x = sim.signal()
-    summary = {
-        "out": str(args.out),
-        "samples": int(sim.t.size),
-        "observable": args.observable,
-        "units": UNITS[args.observable],
-        "min": float(np.min(x)),
-        "max": float(np.max(x)),
-        "dominant_peaks_hz": _peaks(sim.t, x),
-    }
-    if args.plot:
-        from ..plot import plot_signal_and_spectrum
-
-        plot_signal_and_spectrum(
-            args.plot,
-            sim.t,
-            x,
-            label=f"{args.observable} ({UNITS[args.observable]})",
-            title=f"{record.name}: {args.model} model, {args.excitation} excitation",
-        )
-        summary["plot"] = str(args.plot)
-        say(f"wrote {args.plot}")
-    return summary
+    return _written(args, sim, f"{record.name}: {args.model} model, {args.excitation} excitation")
 
 
 def _run_planes(args, record) -> dict:
     """``--channels 2``: both Hall sensors (see :func:`whiskerid.terrain.simulate_planes`)."""
-    import numpy as np
 
-    from ..io import write_csv
     from ..terrain import PLANE_OBSERVABLES, simulate_planes
 
     if args.model != "exact":
@@ -170,9 +140,7 @@ def _run_planes(args, record) -> dict:
             f"{' or '.join(PLANE_OBSERVABLES)}, not {args.observable}"
         )
     base = lateral = None
-    if args.excitation == "base":
-        if args.base is None:
-            raise CommandError("--excitation base needs --base FILE (time and base acceleration)")
+    if _base_given(args):
         cols = (args.base_col or "").split(",") if args.base_col else [None]
         if len(cols) > 2:
             raise CommandError(
@@ -199,34 +167,47 @@ def _run_planes(args, record) -> dict:
         )
     except ValueError as err:
         raise CommandError(str(err)) from None
+    return _written(args, sim, f"{record.name}: two sensors, {args.excitation}", per_channel=True)
+
+
+def _base_given(args) -> bool:
+    """Whether the base motion is read from --base (refused when it is missing)."""
+    if args.excitation == "base" and args.base is None:
+        raise CommandError("--excitation base needs --base FILE (time and base acceleration)")
+    return args.excitation == "base"
+
+
+def _written(args, sim, title: str, *, per_channel: bool = False) -> dict:
+    """Write the recording (and the plot of its first signal); the JSON summary, with a
+    value per column when ``per_channel``."""
+    import numpy as np
+
+    from ..io import write_csv
+
     write_csv(args.out, sim)
-    say(
-        f"wrote {args.out} ({sim.t.size} samples of {args.observable}, columns "
-        f"{', '.join(sim.columns)})"
-    )
-    summary = {
-        "out": str(args.out),
-        "samples": int(sim.t.size),
-        "observable": args.observable,
-        "units": UNITS[args.observable],
-        "channels": list(sim.columns),
-        "min": {c: float(np.min(x)) for c, x in sim.columns.items()},
-        "max": {c: float(np.max(x)) for c, x in sim.columns.items()},
-        "dominant_peaks_hz": {c: _peaks(sim.t, x) for c, x in sim.columns.items()},
-    }
+    columns = f", columns {', '.join(sim.columns)}" if per_channel else ""
+    say(f"wrote {args.out} ({sim.t.size} samples of {args.observable}{columns})")
+    units = UNITS[args.observable]
+    summary = {"out": str(args.out), "samples": int(sim.t.size),
+               "observable": args.observable, "units": units}  # fmt: skip
+    if per_channel:
+        summary["channels"] = list(sim.columns)
+
+    def each(f):
+        return {c: f(x) for c, x in sim.columns.items()} if per_channel else f(sim.signal())
+
+    summary["min"] = each(lambda x: float(np.min(x)))
+    summary["max"] = each(lambda x: float(np.max(x)))
+    summary["dominant_peaks_hz"] = each(lambda x: _peaks(sim.t, x))
     if args.plot:
         from ..plot import plot_signal_and_spectrum
 
-        col = next(iter(sim.columns))
-        plot_signal_and_spectrum(
-            args.plot,
-            sim.t,
-            sim.columns[col],
-            label=f"{col} ({UNITS[args.observable]})",
-            title=f"{record.name}: two sensors, {args.excitation}",
-        )
+        col = next(iter(sim.columns)) if per_channel else None
+        x = sim.columns[col] if per_channel else sim.signal()
+        plot_signal_and_spectrum(args.plot, sim.t, x, label=f"{col or args.observable} ({units})",
+                                 title=title)  # fmt: skip
         summary["plot"] = str(args.plot)
-        say(f"wrote {args.plot} (sensor {col})")
+        say(f"wrote {args.plot}" + (f" (sensor {col})" if per_channel else ""))
     return summary
 
 
