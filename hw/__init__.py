@@ -36,6 +36,7 @@ from ._inputs import INPUT_MUX as INPUT_MUX
 from ._inputs import Input as Input
 from ._inputs import InputScan as InputScan
 from ._inputs import Rounds as Rounds
+from ._inputs import converter as converter
 from ._inputs import data_rate_for as data_rate_for
 from ._inputs import emulated_bus as emulated_bus
 from ._inputs import max_scan_rate_hz as max_scan_rate_hz

@@ -207,6 +207,21 @@ class Rounds:
         return list(times), list(self._codes)
 
 
+def converter(bus, inputs: Sequence[Input], *, config: Config, **timing) -> ADS1115 | InputScan:
+    """What a :class:`~whiskerid.hw.Sampler` reads: the chip of a single input, or an
+    :class:`InputScan` of several.
+
+    Args:
+        bus: The I2C bus (or an emulated one).
+        inputs: The inputs; the configuration's multiplexer is set per input by a scan.
+        config: The chip's configuration.
+        **timing: ``clock`` and ``sleep`` (a virtual clock).
+    """
+    if len(inputs) == 1:
+        return ADS1115(bus, inputs[0].address, config=config, **timing)
+    return InputScan(bus, inputs, config=config, **timing)
+
+
 def emulated_bus(inputs: Sequence[Input], sources: Sequence, *, seed: int = 0,
                  noise_v: float = 0.0, **timing) -> EmulatedADS1115 | EmulatedBus:  # fmt: skip
     """Emulated chip(s) answering on the inputs' addresses, each input's positive pin fed by

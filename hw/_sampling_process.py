@@ -36,9 +36,9 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 
-from ._ads1115 import ADS1115, DEFAULT_CONFIG, Config, open_bus
+from ._ads1115 import DEFAULT_CONFIG, Config, open_bus
 from ._emulator import replay_sources
-from ._inputs import Input, InputScan, data_rate_for, emulated_bus, parse_inputs
+from ._inputs import Input, converter, data_rate_for, emulated_bus, parse_inputs
 from ._sampler import Gap, Sample, Sampler, SamplerStats
 
 
@@ -113,10 +113,7 @@ def open_sampler(spec: SamplerSpec, *, sources: list | None = None, **timing):
         bus = open_bus(spec.i2c_bus)
     else:
         bus = emulated_bus(inputs, sources, seed=spec.seed, **timing)
-    if len(inputs) == 1:
-        adc = ADS1115(bus, inputs[0].address, config=cfg, **timing)
-    else:
-        adc = InputScan(bus, inputs, config=cfg, **timing)
+    adc = converter(bus, inputs, config=cfg, **timing)
     return Sampler(adc, spec.rate_hz, **timing), bus, cfg, inputs
 
 

@@ -192,12 +192,8 @@ def _terrain(args, terrain: str, j: int):
 def _record(hw, bus, inputs, config, mode, args, timing) -> dict:
     names = [i.name for i in inputs]
     n = len(inputs)
-    if n == 1:
-        adc = hw.ADS1115(bus, inputs[0].address, config=config, **timing)
-        to_volts = adc.to_volts
-    else:
-        adc = hw.InputScan(bus, inputs, config=config, **timing)
-        to_volts = adc.to_volts
+    adc = hw.converter(bus, inputs, config=config, **timing)
+    to_volts = adc.to_volts
     sampler = hw.Sampler(adc, args.rate, **timing)
     source = f"emulate {args.emulate}" if args.emulate else f"i2c-{args.i2c_bus}"
     meta = {"source": source, "inputs": ",".join(names), "fsr_v": f"{config.fsr_v:g}",
