@@ -144,6 +144,7 @@ def test_recovers_truth_and_reports_convergence(prob):
     assert again.extra["posterior"]["converged"] == d["converged"]
 
 
+@pytest.mark.slow  # two chains of 1500 steps, for a statistical comparison
 def test_moves_sample_the_same_posterior_and_de_mixes_faster(prob):
     """DE (the default) and the stretch move (lmfit's) agree on ζ's mean and sd (Monte
     Carlo error ≈ 0.03 sd at these lengths); DE's τ is about a third of the stretch move's

@@ -14,6 +14,12 @@ from pathlib import Path
 #: Environment variable naming the folder of JAX's persistent compilation cache.
 CACHE_ENV = "WHISKERID_COMPILE_CACHE"
 
+# JAX's options (lower case; upper case as environment variables) that cache every program.
+_CACHE_ALL = {
+    "jax_persistent_cache_min_compile_time_secs": 0.0,
+    "jax_persistent_cache_min_entry_size_bytes": 0,
+}
+
 
 def cache_dir() -> Path | None:
     """The cache folder the command line uses, or None when switched off."""
@@ -38,6 +44,19 @@ def enable_compile_cache() -> Path | None:
     except OSError:
         return None  # a read-only home: run without the cache rather than fail
     os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", str(path))
-    os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0")
-    os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES", "0")
+    for name, value in _CACHE_ALL.items():
+        os.environ.setdefault(name.upper(), str(value))
     return path
+
+
+def use_compile_cache(folder: Path | None) -> None:
+    """Point JAX's persistent compilation cache at ``folder`` once JAX is imported (a
+    command's own option overrides the environment), or switch it off with None."""
+    import jax
+
+    if folder is None:
+        jax.config.update("jax_enable_compilation_cache", False)
+        return
+    jax.config.update("jax_compilation_cache_dir", str(folder))
+    for name, value in _CACHE_ALL.items():
+        jax.config.update(name, value)

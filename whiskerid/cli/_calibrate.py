@@ -135,14 +135,12 @@ def load_observations(path: Path, record, args) -> list:
     """Read one recording and turn it into :class:`whiskerid.fit.Observation` s per the
     flags: one per free decay found in a pluck recording (several plucks are fitted
     jointly), else one."""
-    from ..fit import check_sampling, observations_from_recording
-    from ..io import read_recording
+    from ..fit import observations_from_file
 
-    rec = read_recording(path, time_col=args.time_col)
-    check_sampling(rec, record)
-    return observations_from_recording(
-        rec,
+    return observations_from_file(
+        path,
         record,
+        time_col=args.time_col,
         signal_col=args.signal_col,
         base_col=args.base_col,
         observable=args.observable,

@@ -4,7 +4,7 @@ import math
 import sys
 from pathlib import Path
 
-from ._cache import CACHE_ENV, cache_dir
+from ._cache import CACHE_ENV, cache_dir, use_compile_cache
 from ._common import CommandError, HelpFormatter, check_outputs, model_folder, record_or_paper
 
 
@@ -250,23 +250,9 @@ def _cache_folder(option: str | None) -> Path | None:
     return folder
 
 
-def _use_compile_cache(folder: Path | None) -> None:
-    """Point JAX's persistent compilation cache at the folder (before anything compiles), or
-    switch it off (the command line may have switched it on through the environment)."""
-    import jax
-
-    if folder is None:
-        jax.config.update("jax_enable_compilation_cache", False)
-        return
-    jax.config.update("jax_compilation_cache_dir", str(folder))
-    # The stream's functions are small: cache them all, however quick they were to compile.
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
-    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-
-
 def _load_model(args, cache: Path | None):
     """The model, loaded with JAX's compilation cache set up; refuses one that cannot serve."""
-    _use_compile_cache(cache)
+    use_compile_cache(cache)
     from ..classify import RATE_TOLERANCE, ClassifierModel
 
     model = ClassifierModel.load(args.model)

@@ -36,6 +36,7 @@ from ._observation import Observation as Observation
 from ._observation import StaticTest as StaticTest
 from ._observation import check_sampling as check_sampling
 from ._observation import observation_from_recording as observation_from_recording
+from ._observation import observations_from_file as observations_from_file
 from ._observation import observations_from_recording as observations_from_recording
 from ._observation import read_static_test as read_static_test
 from ._observation import release_time as release_time

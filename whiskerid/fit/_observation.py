@@ -8,7 +8,14 @@ from pathlib import Path
 import numpy as np
 
 from .._choices import EXCITATIONS, OBSERVABLES
-from ..io import Recording, RecordingError, check_samples, recording_rate, timestamp_rate
+from ..io import (
+    Recording,
+    RecordingError,
+    check_samples,
+    read_recording,
+    recording_rate,
+    timestamp_rate,
+)
 from ..model import WhiskerRecord
 from ._release import find_decays, steady_line
 
@@ -295,6 +302,31 @@ def observations_from_recording(
     if t_start is None and obs.excitation == "decay":
         return _decay_windows(obs, t_end, path, first_only=False)
     return [_cut(obs, t_start, t_end, path)]
+
+
+def observations_from_file(
+    path: str | Path, record: WhiskerRecord, *, time_col: str = "t", **options
+) -> list[Observation]:
+    """Read a recording file and turn it into observations, as the command line does.
+
+    The file is read by :func:`whiskerid.io.read_recording`, its sampling checked against
+    the whisker (:func:`check_sampling`), then converted by
+    :func:`observations_from_recording` with ``options``.
+
+    Args:
+        path: A recording (CSV, NPZ or NPY).
+        record: The whisker's record (its f_1 judges the sampling rate).
+        time_col: The time column's name (CSV) or array's (NPZ).
+        **options: As :func:`observation_from_recording` (``signal_col``, ``observable``,
+            ``excitation``, ...), and ``t_start``/``t_end``.
+
+    Raises:
+        RecordingError: A file that cannot be read, or sampled at odds with the whisker.
+        CalibrationError: As :func:`observations_from_recording`.
+    """
+    rec = read_recording(path, time_col=time_col)
+    check_sampling(rec, record)
+    return observations_from_recording(rec, record, **options)
 
 
 def _cut(obs: Observation, t_start, t_end, path) -> Observation:

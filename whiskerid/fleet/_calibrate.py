@@ -4,7 +4,7 @@ Each session is fitted by :func:`fit_session`, a pure function of the session's 
 record and the settings (so the same numbers come out in this process or on a cluster):
 
 * every recording is read as ``whiskerid calibrate`` reads it, one observation per pluck
-  (:func:`whiskerid.fit.observations_from_recording`);
+  (:func:`whiskerid.fit.observations_from_file`);
 * pluck windows shorter than 64 samples or 5 periods of the record's f_1 are left out (a
   hand's motion taken for a decay), and a pluck whose own f_1 is more than 10 % from the
   session's is marked ``outlier`` and kept out of the within-session spread;
@@ -55,11 +55,10 @@ from ..fit import (
     PluckFit,
     calibrate,
     calibrate_each,
-    check_sampling,
-    observations_from_recording,
+    observations_from_file,
     sha256_of,
 )
-from ..io import RecordingError, atomic_write, read_recording
+from ..io import RecordingError, atomic_write
 from ..model import RecordError, load_record
 from ._layout import Session, discover
 
@@ -146,11 +145,10 @@ def _observations(files, record, settings: FleetSettings) -> list:
     out = []
     f1 = float(record.whisker().natural_frequencies_hz[0])
     for path in files:
-        rec = read_recording(path, time_col=settings.time_col)
-        check_sampling(rec, record)
-        out += observations_from_recording(
-            rec,
+        out += observations_from_file(
+            path,
             record,
+            time_col=settings.time_col,
             signal_col=settings.signal_col,
             observable=settings.observable,
             excitation=settings.excitation,
