@@ -95,8 +95,9 @@ def span_features(ws: WindowSet, spec: FeatureSpec, whisker: WhiskerResponse, co
     parts = [np.zeros((0, spec.n_features))]
     for k, other in enumerate(own.span(count, seed)):
         response, floor = own.rerecord(other, freqs, spec.rate_hz)
+        noise_seed = seed * 1009 + k  # every whisker its own noise
         windows = rerecorded(ws.windows, response, floor, extend=spec.extend_edges,
-                             seed=seed * 1009 + k)  # fmt: skip
+                             seed=noise_seed)  # fmt: skip
         numbers = spec.numbers(other, own)
         parts.append(np.asarray(compute_features(spec, windows, speeds, numbers)))
     return np.concatenate(parts)

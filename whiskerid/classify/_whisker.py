@@ -185,9 +185,10 @@ class WhiskerResponse:
         motion: the filter ``T_other T⁻¹`` (shape ``(bins, channels, channels)``), and per
         bin and channel the white floor to add, ``√(max(1 − |T_other / T|², 0))`` times the
         recording's own (shape ``(bins, channels)``). The sensors' floor (ADC noise,
-        quantisation, the error of timestamp jitter) is white in codes whatever the
-        whisker, so where ``other`` responds more weakly the filter lowers this
-        recording's floor below it, and the added noise makes it up."""
+        quantisation, the error of timestamp jitter) is white in codes: it never passed
+        through the whisker's response. Where ``other`` responds more weakly, the filter
+        lowers this recording's floor below what ``other``'s sensors would have added, and
+        the noise makes it up."""
         t_self = np.abs(np.diagonal(self.transfer(freqs_hz, rate_hz), axis1=1, axis2=2))
         t_other = np.abs(np.diagonal(other.transfer(freqs_hz, rate_hz), axis1=1, axis2=2))
         ratio = t_other / np.maximum(t_self, 1e-300)
