@@ -472,10 +472,13 @@ def test_cli_two_sensors_whisker_aware_model_on_another_calibrated_whisker(tmp_p
     assert main(["dataset", "synth", "--out", str(other), "--runs", "1", "--seed", "3",
                  "--whisker", str(damp), *args]) == 0  # fmt: skip
     train = ["train", str(ds), "--out", str(model), "--hidden", "8", "--max-epochs", "20",
-             "--channel", "hall_a,hall_b", "--whisker", str(paper), "--json"]  # fmt: skip
-    assert main(train) == 0
+             "--channel", "hall_a,hall_b", "--span-whiskers", "2"]  # fmt: skip
+    assert main(train) == 2
+    assert "--span-whiskers goes with --whisker" in capsys.readouterr().err
+    assert main([*train, "--whisker", str(paper), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["channel"] == "hall_a,hall_b" and out["whisker"] == "paper-whisker"
+    assert out["span_whiskers"] == 2 and out["train_windows"] == 3 * out["windows"]
     head = json.loads((model / "model.json").read_text())
     assert head["features"]["deconvolve"] and head["features"]["cross_channel"]
     assert head["features"]["channels"] == 2 and "zeta = 0.04" in head["whisker"]["toml"]

@@ -355,6 +355,48 @@ def test_floor_match_narrows_the_noise_floors_of_whiskers_to_one():
     np.testing.assert_array_equal(matched_noise(x[0], num.dither), matched_noise(x[0], num.dither))
 
 
+def test_span_whiskers_rerecord_windows_with_their_own_floor():
+    """Span whiskers around the paper whisker cover f_1 × 0.6-1.6 and ζ × 0.5-2, one in each
+    slice of either range. White noise alone (the sensors' floor) recorded by the paper
+    whisker and rerecorded as a whisker with f_1 × 0.7 (7-14 dB weaker above 60 Hz), then
+    recoloured back as a model reads that whisker's recordings: its floor at 80-95 Hz
+    stands as far above the paper's as a real recording of the weak whisker's does, where
+    the filter alone gives back the paper's floor; rerecorded as the paper whisker itself,
+    a window is unchanged."""
+    from whiskerid.classify import ALIAS_SLOPE
+    from whiskerid.classify._features import rerecorded, through_filter
+
+    paper = wi.WhiskerResponse(wi.paper_record(), 20.0, alias_slope=ALIAS_SLOPE)
+    span = paper.span(4, seed=0)
+    f1 = [w.record.whisker().natural_frequencies_hz[0] for w in span]
+    ratio = np.asarray(f1) / paper.record.whisker().natural_frequencies_hz[0]
+    zeta = np.asarray([float(np.ravel(w.record.zeta)[0]) for w in span]) / 0.04
+    for r, (lo, hi) in ((ratio, (0.6, 1.6)), (zeta, (0.5, 2.0))):
+        assert sorted(np.floor(4 * np.log(r / lo) / np.log(hi / lo)).tolist()) == [0, 1, 2, 3]
+    weak = paper.scaled(0.7, 1.0)
+    x = 2.0 * np.random.default_rng(0).standard_normal((48, 200))
+    freqs = np.fft.rfftfreq(400, 1 / 200)
+    response, floor = paper.rerecord(weak, freqs, 200.0)
+    back = jnp.asarray(weak.recolour(paper, freqs, 200.0))
+    band = (freqs[::2] > 80) & (freqs[::2] < 95)
+
+    def level(y):
+        y = np.asarray(jax.vmap(lambda w: through_filter(w[None], back, True))(jnp.asarray(y)))
+        p = np.abs(np.fft.rfft(y[:, 0] * np.hanning(200))) ** 2
+        return 10 * np.log10(np.mean(p[:, band]))
+
+    own = 10 * np.log10(np.mean(np.abs(np.fft.rfft(x * np.hanning(200))[:, band]) ** 2))
+    real = level(x) - own  # the weak whisker's own recording of the floor, recoloured
+    span_gap = level(rerecorded(x, response, floor, extend=True, seed=1)) - own
+    bare_gap = level(rerecorded(x, response, 0 * floor, extend=True, seed=1)) - own
+    gaps = (real, span_gap, bare_gap)
+    assert real > 8 and abs(span_gap - real) < 1.5 and abs(bare_gap) < 1.5, gaps
+    same, none = paper.rerecord(paper, freqs, 200.0)
+    assert np.all(none == 0)
+    np.testing.assert_allclose(rerecorded(x, same, none, extend=True, seed=1),
+                               x - x.mean(1, keepdims=True), atol=1e-2)  # fmt: skip
+
+
 def test_cross_channel_features_read_the_motion_ellipse():
     """Two channels moving together along 30° from sensor A: coherence near 1, orientation
     2θ = 60°, axis ratio near 0; independent channels: low coherence, ratio near 1."""

@@ -46,7 +46,9 @@ from ._split import split_by_recording as split_by_recording
 from ._train import default_spec as default_spec
 from ._train import features_of as features_of
 from ._train import fit_on_features as fit_on_features
+from ._train import span_features as span_features
 from ._train import train_classifier as train_classifier
 from ._whisker import ALIAS_SLOPE as ALIAS_SLOPE
+from ._whisker import SPAN_WHISKERS as SPAN_WHISKERS
 from ._whisker import WhiskerResponse as WhiskerResponse
 from ._whisker import deflection_per_acc as deflection_per_acc

@@ -18,7 +18,14 @@ from ._mlp import (
 )
 from ._model_file import ClassifierModel
 from ._split import recording_folds
-from ._train import check_classes, default_spec, features_of, fit_on_features
+from ._train import (
+    check_classes,
+    default_spec,
+    features_of,
+    fit_on_features,
+    span_count,
+    with_span_features,
+)
 from ._whisker import WhiskerResponse
 
 
@@ -217,6 +224,7 @@ def cross_validate(
     progress: bool = False,
     whisker=None,
     window_fit: bool = False,
+    span_whiskers: int | None = None,
 ) -> dict:
     """Cross-validation by recording: every recording is tested once, by a model that
     never saw it (:func:`recording_folds`).
@@ -238,6 +246,9 @@ def cross_validate(
         whisker: The calibrated whisker (:class:`WhiskerResponse`) that recorded ``ws``,
             for whisker-aware features (see :func:`train_classifier`).
         window_fit: Per-window damped-oscillation fits among the features.
+        span_whiskers: Whiskers of the span each training window is also seen through
+            (see :func:`train_classifier`); only the training folds' windows, never a
+            test fold's.
 
     Returns:
         :func:`scores` of the fused labels pooled over all windows, plus
@@ -256,14 +267,17 @@ def cross_validate(
     window_s = spec.window / spec.rate_hz
     context_s = default_context_s(features, window_s) if context_s is None else context_s
     check_context(context_s, window_s)
-    feats = features_of(ws, spec, whisker)
+    count = span_count(span_whiskers, whisker)
+    plain = features_of(ws, spec, whisker)
+    feats, all_ws, index = with_span_features(plain, ws, spec, whisker, count, config.seed)
     proba = np.zeros((len(ws), len(ws.label_names)))
     for k in _progress(range(folds), progress, desc="folds"):
         test = fold == k
-        model = fit_on_features(feats[~test], ws.subset(~test), spec,
+        train = ~test[index]
+        model = fit_on_features(feats[train], all_ws.subset(train), spec,
                                 replace(config, seed=config.seed + seed + k),
                                 whisker=whisker)  # fmt: skip
-        proba[test] = _proba_from_features(model, feats[test])
+        proba[test] = _proba_from_features(model, plain[test])
     lookback = max(context_s - window_s, 0.0)
     fused = fuse_context(proba, ws.recording, ws.starts(), lookback_s=lookback)
     pred, y = np.argmax(fused, axis=1), ws.labels

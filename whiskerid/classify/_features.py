@@ -45,6 +45,7 @@ structure at other rates, or with other training speeds, share one compilation.
 """
 
 from dataclasses import asdict, dataclass, replace
+from functools import partial
 from typing import Literal, NamedTuple
 
 import jax
@@ -635,6 +636,29 @@ def base_band_levels(base, rate_hz, edges) -> jax.Array:
     inside = (f[None, :] >= edges[:-1, None]) & (f[None, :] < edges[1:, None])
     inside = inside.at[-1].set(inside[-1] | (f == edges[-1]))
     return 10 * jnp.log10(power @ inside.T.astype(power.dtype) + 1e-20)
+
+
+def rerecorded(windows, response, floor_shape, *, extend: bool, seed: int) -> np.ndarray:
+    """Windows ``(n, *window_shape)`` as another whisker would have recorded the same base
+    motion (:meth:`WhiskerResponse.rerecord`): each through ``response`` (per bin of a
+    ``2 × window``-point FFT, ``(bins, channels, channels)``; ``extend`` as in
+    :func:`through_filter`), plus white noise shaped by ``floor_shape`` (``(bins,
+    channels)``) times the window's own floor (:func:`noise_floor`), drawn from ``seed``.
+    """
+    x = jnp.asarray(windows, dtype=float)
+    many = x if x.ndim == 3 else x[:, None]
+    key = jax.random.PRNGKey(seed)
+    out = _rerecorded(many, jnp.asarray(response), jnp.asarray(floor_shape), extend, key)
+    return np.asarray(out if x.ndim == 3 else out[:, 0])
+
+
+@partial(jax.jit, static_argnums=3)
+def _rerecorded(xs, response, floor_shape, extend, key):
+    n = xs.shape[-1]
+    filtered = jax.vmap(lambda w: through_filter(w, response, extend))(xs)
+    white = jax.random.normal(key, (*xs.shape[:-1], 2 * n), dtype=xs.dtype)
+    shaped = jnp.fft.irfft(jnp.fft.rfft(white, axis=-1) * floor_shape.T, 2 * n, axis=-1)
+    return filtered + shaped[..., :n] * jnp.sqrt(jax.vmap(noise_floor)(xs))[..., None]
 
 
 #: Percentile of a window's own power spectrum taken as its noise floor: most bins of a

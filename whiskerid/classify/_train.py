@@ -7,11 +7,11 @@ import numpy as np
 
 from ._context import check_context, default_context_s
 from ._dataset import WindowSet
-from ._features import FeatureSpec, compute_features
+from ._features import FeatureSpec, compute_features, rerecorded
 from ._mlp import TrainConfig, default_config, train_mlp
 from ._model_file import ClassifierModel, recording_hashes
 from ._split import grouped_split
-from ._whisker import ALIAS_SLOPE, WhiskerResponse
+from ._whisker import ALIAS_SLOPE, SPAN_WHISKERS, WhiskerResponse
 
 
 def default_spec(
@@ -73,6 +73,56 @@ def features_of(ws: WindowSet, spec: FeatureSpec, whisker: WhiskerResponse | Non
             "is absurdly large (such as 1e308); mend or remove the recording(s)"
         )
     return feats
+
+
+def span_features(ws: WindowSet, spec: FeatureSpec, whisker: WhiskerResponse, count: int,
+                  seed: int = 0) -> np.ndarray:  # fmt: skip
+    """Features of every window of ``ws`` (recorded with ``whisker``) as each of ``count``
+    whiskers of the span around it would have recorded the same base motion
+    (:meth:`WhiskerResponse.span`, :meth:`WhiskerResponse.rerecord`: through that whisker's
+    response, with the sensors' white floor made up where it responds more weakly), read
+    as a model with ``whisker`` reads that whisker's recordings: recoloured back, floor
+    matched. Shape ``(count × n, spec.n_features)``, whisker by whisker.
+
+    Recolouring gives back the training whisker's signal but not its floor: a weaker
+    whisker's floor, recoloured, stands above the matched floor wherever that whisker is
+    weaker than the span's average, and a model trained on one whisker alone reads that
+    as ground. Trained on these too, it learns what the recolouring leaves.
+    """
+    own = replace(whisker, alias_slope=spec.alias_slope)
+    freqs = np.fft.rfftfreq(2 * spec.window, 1.0 / spec.rate_hz)
+    speeds = ws.speeds if (spec.kind == "fitted" and spec.use_speed) else None
+    parts = [np.zeros((0, spec.n_features))]
+    for k, other in enumerate(own.span(count, seed)):
+        response, floor = own.rerecord(other, freqs, spec.rate_hz)
+        noise_seed = seed * 1009 + k  # every whisker its own noise
+        windows = rerecorded(ws.windows, response, floor, extend=spec.extend_edges,
+                             seed=noise_seed)  # fmt: skip
+        numbers = spec.numbers(other, own)
+        parts.append(np.asarray(compute_features(spec, windows, speeds, numbers)))
+    return np.concatenate(parts)
+
+
+def with_span_features(feats, ws, spec, whisker, count, seed):
+    """The features of ``ws`` followed by its :func:`span_features`, the window set
+    repeated to match, and each row's window."""
+    index = np.tile(np.arange(len(ws)), count + 1)
+    if count == 0:
+        return feats, ws, index
+    span = span_features(ws, spec, whisker, count, seed)
+    return np.concatenate([feats, span]), ws.subset(index), index
+
+
+def span_count(span_whiskers: int | None, whisker: WhiskerResponse | None) -> int:
+    """How many span whiskers training adds: :data:`SPAN_WHISKERS` for a whisker-aware
+    model by default, none without a whisker."""
+    if span_whiskers is None:
+        return SPAN_WHISKERS if whisker is not None else 0
+    if span_whiskers < 0:
+        raise ValueError(f"span_whiskers must be 0 or more, not {span_whiskers}")
+    if span_whiskers and whisker is None:
+        raise ValueError("span whiskers need the calibrated whisker that made the recordings")
+    return int(span_whiskers)
 
 
 #: Features beyond this cannot be standardised in float32, the networks' precision.
@@ -150,6 +200,7 @@ def train_classifier(
     context_s: float | None = None,
     whisker: WhiskerResponse | None = None,
     window_fit: bool = False,
+    span_whiskers: int | None = None,
 ) -> ClassifierModel:
     """Train a classifier on labelled windows.
 
@@ -169,7 +220,11 @@ def train_classifier(
             calibrated whisker (:meth:`ClassifierModel.use_whisker`).
         window_fit: Add per-window damped-oscillation fits (``fitted``; see
             :class:`FeatureSpec`).
+        span_whiskers: With ``whisker``: train also on every window as this many whiskers
+            of the span the model serves would have recorded it (:func:`span_features`);
+            :data:`SPAN_WHISKERS` by default, 0 for the training whisker's windows alone.
     """
+    count = span_count(span_whiskers, whisker)
     if config is None:
         config = default_config(features)
     check_classes(ws)
@@ -180,8 +235,11 @@ def train_classifier(
                         window_fit=window_fit)  # fmt: skip
     if context_s is None:
         context_s = default_context_s(features, spec.window / spec.rate_hz)
-    model = fit_on_features(features_of(ws, spec, whisker), ws, spec, config,
-                            context_s=context_s, whisker=whisker)  # fmt: skip
+    plain = features_of(ws, spec, whisker)
+    feats, train_ws, _ = with_span_features(plain, ws, spec, whisker, count, config.seed)
+    model = fit_on_features(feats, train_ws, spec, config, context_s=context_s,
+                            whisker=whisker)  # fmt: skip
+    model.info["span_whiskers"] = count
     model.info["recordings_sha256"] = recording_hashes(ws.sources)
     model.channel = ws.channel if channel is None else channel
     if hop is not None:

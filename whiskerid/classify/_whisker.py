@@ -51,6 +51,9 @@ ZETA_SPAN = (0.5, 2.0)
 #: ``α`` of the aliases' weight ``(f/f_m)^α`` in models that weight them (see the module
 #: docstring): base acceleration power falling as ``1/f`` above the band.
 ALIAS_SLOPE = 1.0
+#: Whiskers of that span each training window of a whisker-aware model is also seen
+#: through (:meth:`WhiskerResponse.span`, :func:`whiskerid.train_classifier`).
+SPAN_WHISKERS = 8
 #: Regularisation of the inverse, relative to the largest gain: bins where the whisker's
 #: response is this far below its peak are not amplified further.
 REGULARISATION = 1e-3
@@ -161,6 +164,35 @@ class WhiskerResponse:
             extra["planes"] = {**planes.to_table(), "lateral_zeta": lat.tolist()}
         zeta_v = float(zeta) if zeta.ndim == 0 else tuple(float(z) for z in zeta)
         return replace(self, record=rec.replace(structure=stiffer, zeta=zeta_v, extra=extra))
+
+    def span(self, count: int, seed: int = 0) -> list["WhiskerResponse"]:
+        """``count`` whiskers spread over the span a model trained with this one serves
+        (f₁ × :data:`F1_SPAN`, ζ × :data:`ZETA_SPAN`): log-uniform in both, one in each
+        ``1/count`` slice of either range (a Latin hypercube), seeded."""
+        rng = np.random.default_rng(seed)
+
+        def spread(lo_hi):
+            lo, hi = np.log(lo_hi)
+            u = (rng.permutation(count) + rng.uniform(size=count)) / count
+            return np.exp(lo + u * (hi - lo))
+
+        f1, zeta = spread(F1_SPAN), spread(ZETA_SPAN)
+        return [self.scaled(float(a), float(b)) for a, b in zip(f1, zeta, strict=True)]
+
+    def rerecord(self, other: "WhiskerResponse", freqs_hz, rate_hz: float
+                 ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+        """What turns a recording of this whisker into one of ``other``'s of the same base
+        motion: the filter ``T_other T⁻¹`` (shape ``(bins, channels, channels)``), and per
+        bin and channel the white floor to add, ``√(max(1 − |T_other / T|², 0))`` times the
+        recording's own (shape ``(bins, channels)``). The sensors' floor (ADC noise,
+        quantisation, the error of timestamp jitter) is white in codes: it never passed
+        through the whisker's response. Where ``other`` responds more weakly, the filter
+        lowers this recording's floor below what ``other``'s sensors would have added, and
+        the noise makes it up."""
+        t_self = np.abs(np.diagonal(self.transfer(freqs_hz, rate_hz), axis1=1, axis2=2))
+        t_other = np.abs(np.diagonal(other.transfer(freqs_hz, rate_hz), axis1=1, axis2=2))
+        ratio = t_other / np.maximum(t_self, 1e-300)
+        return self.recolour(other, freqs_hz, rate_hz), np.sqrt(np.maximum(1 - ratio**2, 0.0))
 
     def floor_gain(self, freqs_hz, rate_hz: float) -> np.ndarray:
         """``G(f)``: per channel, how far the whiskers of a span around this one

@@ -54,6 +54,13 @@ def add_parser(sub) -> None:
         "classify/evaluate --whisker can run it on another calibrated whisker",
     )  # fmt: skip
     t.add_argument(
+        "--span-whiskers", type=int, metavar="N",
+        help="with --whisker: also train on every window as N whiskers around the calibrated "
+        "one (f1 x0.6-1.6, zeta x0.5-2) would have recorded it, so that the model serves "
+        "them alike (8 by default; 0: the recordings alone; each costs about as much "
+        "feature time as the recordings themselves)",
+    )  # fmt: skip
+    t.add_argument(
         "--modal-fit", action="store_true",
         help="with --features fitted: add a damped oscillation fitted to each window in the "
         "time domain (all windows at once): its frequency, zeta, amplitude and whether the "
@@ -125,12 +132,18 @@ def run(args) -> dict:
     hop = None if args.hop is None else round(args.hop * ws.rate_hz)
     use_speed = False if args.no_speed else None
     whisker = _whisker(args.whisker, ws)
+    if args.span_whiskers is not None and args.span_whiskers < 0:
+        raise CommandError(f"--span-whiskers must be 0 or more, not {args.span_whiskers}")
+    if args.span_whiskers and whisker is None:
+        raise CommandError("--span-whiskers goes with --whisker (the calibrated whisker that "
+                           "made the recordings)")  # fmt: skip
     cv = None
     if args.cv is not None:
         cv = cross_validate(ws, features=args.features, folds=args.cv, seed=args.seed,
                             config=config, context_s=args.context, use_speed=use_speed,
                             progress=show_progress(args), whisker=whisker,
-                            window_fit=args.modal_fit)  # fmt: skip
+                            window_fit=args.modal_fit,
+                            span_whiskers=args.span_whiskers)  # fmt: skip
         cv = {k: cv[k] for k in ("folds", "accuracy", "accuracy_per_window", "per_class",
                                  "accuracy_by_fold", "context_s", "accuracy_per_recording",
                                  "n_recordings")}  # fmt: skip
@@ -140,7 +153,8 @@ def run(args) -> dict:
     model = train_classifier(ws, features=args.features, config=config,
                              use_speed=use_speed, channel=None, hop=hop,
                              context_s=args.context, whisker=whisker,
-                             window_fit=args.modal_fit)  # fmt: skip
+                             window_fit=args.modal_fit,
+                             span_whiskers=args.span_whiskers)  # fmt: skip
     if cv is not None:
         model.info["cross_validation"] = cv
     model.save(args.out)
