@@ -403,3 +403,22 @@ def test_calibrating_a_recording_timed_in_ms_is_refused(tmp_path, capsys):
                  message)  # fmt: skip
         assert not out.exists()
         sim.meta.pop("rate_hz", None)
+
+
+def test_observations_from_file_reads_checks_and_converts_as_the_command_does(tmp_path):
+    """The library's one call from a file to observations: the same observations as reading
+    and converting by hand, and a time column in ms refused before anything is fitted."""
+    from whiskerid.fit import observations_from_file, observations_from_recording
+
+    t = np.arange(600) / 200.0
+    y = 1e-5 * np.exp(-2.0 * t) * np.cos(2 * np.pi * 30.0 * t)
+    record = wi.paper_record()
+    good = wi.write_csv(tmp_path / "s.csv", wi.Recording(t=t, columns={"deflection": y}))
+    (a,) = observations_from_file(good, record, excitation="decay", t_start=0.0)
+    (b,) = observations_from_recording(wi.read_recording(good), record, excitation="decay",
+                                       t_start=0.0)  # fmt: skip
+    np.testing.assert_array_equal(a.y, b.y)
+    assert a.t[0] == b.t[0] == 0.0 and a.excitation == "decay"
+    ms = wi.write_csv(tmp_path / "ms.csv", wi.Recording(t=t * 1000.0, columns={"deflection": y}))
+    with pytest.raises(wi.RecordingError, match="is the time column in seconds"):
+        observations_from_file(ms, record)
