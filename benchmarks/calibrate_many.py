@@ -5,10 +5,12 @@ coils, sensor position; the paper whisker's material), each a pluck read by the 
 200 Hz for 10 s (SNR 30 dB), calibrated by :func:`whiskerid.calibrate` from a nominal record
 30 % off in f_1. The whisker's numbers are traced leaves of the fit problem, so only the
 first fit compiles. Reports the number of XLA compilations per fit (counted with
-``jax.monitoring``), the first fit's time (compilation included), the warm time per fit
-and the errors of f_1 and ζ. The peer, measured in the same run, is the same fit compiled anew
-for each whisker (JAX's caches cleared before each of ``--peer-fits`` fits), which is what a
-fit whose numbers are part of the compiled code's cache key costs.
+``jax.monitoring``), the first fit's time (compilation included), the warm time per fit,
+the errors of f_1 and ζ, and the fits' statuses (a whisker whose f_1 is near the 100 Hz
+Nyquist frequency is ``check``: its alias fits as well). The peer, measured in the same run,
+is the same fit compiled anew for each whisker (JAX's caches cleared before each of
+``--peer-fits`` fits), which is what a fit whose numbers are part of the compiled code's
+cache key costs.
 
 Run: ``python benchmarks/calibrate_many.py [--whiskers N] [--duration S]`` (prints JSON).
 """
@@ -77,7 +79,7 @@ def main() -> None:
         observations.append(
             wi.Observation(sim.t, sim.signal(), excitation="decay", observable="adc", gain=None)
         )
-    times, compiles, f1_err, zeta_err, ok = [], [], [], [], []
+    times, compiles, f1_err, zeta_err, ok, status = [], [], [], [], [], []
     for rec, obs in zip(records, observations, strict=True):
         before = len(_COMPILES)
         t0 = time.perf_counter()
@@ -88,6 +90,7 @@ def main() -> None:
         f1_err.append(cal.params["f1_hz"]["value"] / float(w.natural_frequencies_hz[0]) - 1)
         zeta_err.append(cal.params["zeta"]["value"] / float(w.zeta[0]) - 1)
         ok.append(cal.ok)
+        status.append(cal.status)
     peer_times, peer_compiles = [], []
     for rec, obs in list(zip(records, observations, strict=True))[1 : 1 + args.peer_fits]:
         jax.clear_caches()
@@ -116,6 +119,13 @@ def main() -> None:
                 ),
                 "f1_rel_error_median": float(np.median(np.abs(f1_err))),
                 "f1_rel_error_max": float(np.max(np.abs(f1_err))),
+                "statuses": {k: status.count(k) for k in sorted(set(status))},
+                "f1_rel_error_max_status_ok": float(
+                    max(
+                        (abs(e) for e, s in zip(f1_err, status, strict=True) if s == "ok"),
+                        default=float("nan"),
+                    )
+                ),
                 "zeta_rel_error_median": float(np.median(np.abs(zeta_err))),
                 "jax": jax.__version__,
                 "cpu": platform.processor() or platform.machine(),

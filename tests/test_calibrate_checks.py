@@ -42,6 +42,9 @@ CASES = [
                   "zeta-large", "at-bound"}, marks=pytest.mark.slow),
     pytest.param("a steady line the model does not have", lambda r: r, _hum,
                  {"residual-peak", "correlated-residuals"}, marks=pytest.mark.slow),
+    pytest.param("f1 87 Hz sampled at 200 Hz from a record 30 % high: its alias at 113 Hz "
+                 "fits as well", lambda r: _stiffer(r, 1.3**2), None, {"aliased"},
+                 marks=pytest.mark.slow),
 ]  # fmt: skip
 
 
@@ -49,6 +52,12 @@ CASES = [
 def test_a_wrong_or_doubtful_fit_is_not_ok(what, given, extra, expected):
     truth = _fast_record()
     rec = _pluck(truth, extra=extra)
+    if "aliased" in expected:  # a stiffer whisker, read at 200 Hz
+        truth = _stiffer(paper_record(), (87.0 / 46.0) ** 2)
+        r, _ = simulate_pluck(truth, kind="held", rate_hz=200.0, duration_s=3.0, release_s=0.5,
+                              noise_db=35.0, seed=0)  # fmt: skip
+        rec = Recording(t=r.t, columns={"adc": r.signal().astype(float)},
+                        meta={"excitation": "decay"}, source="p.csv")  # fmt: skip
     nominal = given(truth)
     cal = calibrate(nominal, observations_from_recording(rec, nominal, observable="adc"))
     assert cal.status != "ok", what
@@ -103,3 +112,22 @@ def test_reported_sigma_matches_the_spread_of_seeded_repeats(make):
         sigma = np.median([c.params[name]["std"] for c in fits])
         ratio = sigma / np.std(values, ddof=1)
         assert 1 / 1.6 < ratio < 1.6, (name, ratio)
+
+
+# (fitted f1, the f1 expected, rates of the decay recordings, the alias reported or None)
+ALIASES = [
+    (46.0, 59.8, [200.0], None),  # the paper whisker at 200 Hz from a record 30 % high
+    (112.9, 113.4, [200.0], 87.1),  # above the Nyquist frequency: the start decided
+    (87.1, 113.4, [200.0], 112.9),  # below it, but the alias is nearer the record's
+    (87.1, 87.0, [200.0], None),  # below it and nearer the record's
+    (87.1, 113.4, [200.0, 860.0], None),  # a recording at 860 Hz tells them apart
+    (87.1, 113.4, [], None),  # no free decay (sine or base excitation)
+]
+
+
+@pytest.mark.parametrize(("f1", "expected", "rates", "alias"), ALIASES)
+def test_an_f1_is_aliased_when_the_data_cannot_choose_it(f1, expected, rates, alias):
+    from whiskerid.fit._checks import aliased
+
+    got = aliased(f1, expected, rates)
+    assert (got is None) if alias is None else got == pytest.approx(alias)

@@ -31,7 +31,7 @@ from .._choices import PINS
 from ..model import WhiskerRecord
 from . import _lsq as _lsq
 from ._calibrate import GTOL, POOR_FIT_SNR_DB
-from ._checks import check_fit, lag1, residual_peak
+from ._checks import check_fit, decay_rates, lag1, residual_peak
 from ._observation import CalibrationError, Observation
 from ._problem import FitProblem, _flat_residuals, reported_names
 from ._start import start_values
@@ -197,7 +197,7 @@ def _pluck_fit(problem: FitProblem, obs: Observation, b: dict, names, f1_nominal
         if not per_rec["snr_db"] >= POOR_FIT_SNR_DB:
             status = "poor fit"
         else:
-            checks = check_fit(params, [per_rec], f1_nominal)
+            checks = check_fit(params, [per_rec], f1_nominal, decay_rates_hz=decay_rates([obs]))
             status = "check" if checks else "ok"
     return PluckFit(
         status=status,

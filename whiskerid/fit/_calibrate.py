@@ -50,7 +50,14 @@ from .._choices import PINS
 from .._version import __version__
 from ..io import sha256_of
 from ..model import UniformBeam, WhiskerRecord
-from ._checks import LAG1_MAX, check_fit, hac_covariance, no_smaller_than, residual_peak
+from ._checks import (
+    LAG1_MAX,
+    check_fit,
+    decay_rates,
+    hac_covariance,
+    no_smaller_than,
+    residual_peak,
+)
 from ._checks import lag1 as lag1_autocorr
 from ._lsq import gradient_cosine_from, residual_variance, scaled_inverse_gram
 from ._observation import CalibrationError, Observation, StaticTest
@@ -243,7 +250,10 @@ def calibrate(
         "uncertainty": uncertainty,
     }
     warnings = _poor_fit_warnings(per_rec)
-    checks = check_fit(params, per_rec, float(nominal.natural_frequencies_hz[0])) if ok else {}
+    checks = {}
+    if ok:
+        checks = check_fit(params, per_rec, float(nominal.natural_frequencies_hz[0]),
+                           decay_rates_hz=decay_rates(obs), f1_expected_hz=f1_start_hz)  # fmt: skip
     if ok and warnings:
         status = "poor fit"
     elif ok and checks:

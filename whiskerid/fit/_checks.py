@@ -15,6 +15,9 @@ fit left behind and at what it found, each with a name, a threshold and a senten
 * ``far-from-nominal``: f_1 outside 0.4–2.5 times the record's (EI outside 0.16–6.25
   times): the record is probably not this whisker's;
 * ``imprecise``: f_1 known to worse than 0.5 % or ζ to worse than 10 % (1σ);
+* ``aliased``: f_1 and ``rate − f_1`` look alike in the samples of a free decay; the fitted
+  one is above the Nyquist frequency of the fastest decay recording, or its alias is nearer
+  the record's f_1 (the choice rests on the start, not the data);
 * ``mode-1-weak``: a free decay explained by a higher mode while mode 1 carries under a fifth
   of its RMS: a pluck or tap rings mostly in mode 1, so the fit has probably taken the data's
   main line for an aliased higher mode (f_1 off by the mode ratio).
@@ -128,8 +131,19 @@ def no_smaller_than(cov: np.ndarray, floor: np.ndarray) -> np.ndarray:
     return corr * np.outer(s, s)
 
 
-def check_fit(params: dict, per_rec: list[dict], f1_nominal_hz: float) -> dict[str, str]:
-    """The failed checks of a converged fit, name → sentence (see the module docstring)."""
+def check_fit(
+    params: dict,
+    per_rec: list[dict],
+    f1_nominal_hz: float,
+    *,
+    decay_rates_hz=(),
+    f1_expected_hz: float | None = None,
+) -> dict[str, str]:
+    """The failed checks of a converged fit, name → sentence (see the module docstring).
+
+    For ``aliased``: ``decay_rates_hz`` are the sampling rates of the free-decay recordings,
+    ``f1_expected_hz`` the f_1 the user expects (a given start; the record's by default).
+    """
     out: dict[str, str] = {}
     worst = max(per_rec, key=lambda r: r["lag1_autocorr"])
     if worst["lag1_autocorr"] > LAG1_MAX:
@@ -172,6 +186,16 @@ def check_fit(params: dict, per_rec: list[dict], f1_nominal_hz: float) -> dict[s
             f"f1 = {f1['value']:.4g} Hz is {ratio:.2g} times the record's {f1_nominal_hz:.4g} "
             "Hz: is the record this whisker's?"
         )
+    expected = f1_nominal_hz if f1_expected_hz is None else f1_expected_hz
+    alias = aliased(f1["value"], expected, decay_rates_hz)
+    if alias is not None:
+        out["aliased"] = (
+            f"f1 = {f1['value']:.4g} Hz and {alias:.4g} Hz are aliases of each other at "
+            f"{max(decay_rates_hz):.4g} Hz: the samples of a free decay cannot tell them apart, "
+            f"and the fitted one lies above the Nyquist frequency or further from {expected:.4g} "
+            "Hz (the record's f1, or the start given); record faster "
+            "(the ADS1115 converts at up to 860 SPS) or give --f1-start at the true f1"
+        )
     rel_f1 = f1["std"] / abs(f1["value"])
     rel_z = zeta["std"] / max(abs(zeta["value"]), 1e-300)
     if not (rel_f1 <= F1_REL_STD and rel_z <= ZETA_REL_STD):
@@ -180,3 +204,27 @@ def check_fit(params: dict, per_rec: list[dict], f1_nominal_hz: float) -> dict[s
             "(1 sigma): record a longer or cleaner decay"
         )
     return out
+
+
+def aliased(f1_hz: float, f1_expected_hz: float, rates_hz) -> float | None:
+    """The alias ``rate − f_1`` that free decays sampled at ``rates_hz`` cannot tell from
+    ``f1_hz``, when the fit's choice between them rests on nothing the data say: ``f1_hz``
+    above the Nyquist frequency of the fastest recording (the samples place a line below
+    it), or the alias nearer (in ratio) to the f_1 expected, ``f1_expected_hz``. None
+    otherwise, and for no recordings.
+    """
+    if len(rates_hz) == 0:
+        return None
+    rate = float(max(rates_hz))
+    alias = abs(rate - f1_hz)
+    if alias <= 0:
+        return None
+    above = f1_hz > rate / 2
+    nearer = abs(np.log(alias / f1_expected_hz)) < abs(np.log(f1_hz / f1_expected_hz))
+    return alias if (above or nearer) else None
+
+
+def decay_rates(observations) -> list[float]:
+    """Sampling rates (Hz, from the median step) of the free-decay observations."""
+    return [1.0 / float(np.median(np.diff(o.t))) for o in observations
+            if o.excitation == "decay" and o.t.size > 1]  # fmt: skip
