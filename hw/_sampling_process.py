@@ -197,6 +197,7 @@ class SamplingProcess:
             self.stats = SamplerStats(**msg["end"])
             self._ended = True
             return None
+        self._ended = True  # nothing follows the error: close() need not wait for its end
         raise SamplingError(f"the sampling process could not start: {msg['error']}")
 
     def _arrival(self, sent_ns: int) -> float:
@@ -204,6 +205,7 @@ class SamplingProcess:
         return self._clock() - max(time.monotonic_ns() - sent_ns, 0) * 1e-9
 
     def _died(self) -> None:
+        self._ended = True
         code = self._proc.wait()
         raise SamplingError(f"the sampling process ended unexpectedly (exit status {code})")
 

@@ -76,7 +76,9 @@ def test_a_child_that_cannot_start_says_why(tmp_path):
     proc = hw.SamplingProcess(hw.SamplerSpec(replay=str(tmp_path / "missing.csv")))
     with pytest.raises(hw.SamplingError, match=r"missing\.csv"):
         list(proc)
-    proc.close()
+    t0 = time.perf_counter()
+    proc.close(timeout_s=60.0)  # the child has ended: no end line to wait for
+    assert time.perf_counter() - t0 < 30.0
 
 
 def test_a_stream_counts_latency_from_the_samples_arrival():
