@@ -33,6 +33,7 @@ report says so.
 
 import numpy as np
 
+from ..io import timestamp_rate
 from ._problem import ZETA_MAX
 
 #: Lag-1 autocorrelation of the residuals above which they are not treated as white noise.
@@ -225,6 +226,6 @@ def aliased(f1_hz: float, f1_expected_hz: float, rates_hz) -> float | None:
 
 
 def decay_rates(observations) -> list[float]:
-    """Sampling rates (Hz, from the median step) of the free-decay observations."""
-    return [1.0 / float(np.median(np.diff(o.t))) for o in observations
-            if o.excitation == "decay" and o.t.size > 1]  # fmt: skip
+    """Sampling rates (Hz, :func:`whiskerid.io.timestamp_rate`) of the free-decay
+    observations."""
+    return [timestamp_rate(o.t, where=o.name) for o in observations if o.excitation == "decay"]

@@ -302,29 +302,27 @@ def _finish(prep: _Prepared, singles, settings: FleetSettings) -> dict:
     return {"row": row, "record_toml": toml_text}
 
 
-def _joint_start(obs, singles):
-    """Start values of the joint fit from the single plucks' fits (in ``obs``'s order), or
-    None (the joint fit then searches its own) when a pluck has no usable fit or the plucks
-    disagree on f_1 (one of them may be a spurious window the joint fit must judge)."""
+def _joint_start(obs, singles, ordered):
+    """Start values of the joint fit of ``ordered`` from the single plucks' fits (in
+    ``obs``'s order), or None (the joint fit then searches its own) when a pluck has no
+    usable fit or the plucks disagree on f_1 (one of them may be a spurious window the joint
+    fit must judge)."""
     if any(s.status not in USABLE for s in singles):
         return None
     f1 = np.array([s.f1_hz for s in singles])
     if not np.all(np.abs(f1 / np.median(f1) - 1) <= OUTLIER_F1):
         return None
-    theta = {k: np.median([np.asarray(s.optimum[k]) for s in singles], axis=0)
+    start = {k: np.median([np.asarray(s.optimum[k]) for s in singles], axis=0)
              for k in ("log_kappa", "zeta_u")}  # fmt: skip
     by_obs = {id(o): s for o, s in zip(obs, singles, strict=True)}
-    return theta, by_obs
+    start["recs"] = [by_obs[id(o)].optimum["recs"][0] for o in ordered]
+    return start
 
 
 def _fit_plucks(prep: _Prepared, singles, settings):
     session, key, record, obs, row = prep.session, prep.key, prep.record, prep.obs, prep.row
     ordered = sorted(obs, key=lambda o: -o.t.size)
-    start = _joint_start(obs, singles)
-    if start is not None:
-        theta, by_obs = start
-        theta["recs"] = [by_obs[id(o)].optimum["recs"][0] for o in ordered]
-        start = theta
+    start = _joint_start(obs, singles, ordered)
     joint = _fit(record, ordered, settings, start=start)
     f1, f1_std = _value(joint, "f1_hz")
     zeta, zeta_std = _value(joint, "zeta")
