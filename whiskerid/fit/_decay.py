@@ -8,9 +8,12 @@ over the offsets ``o_k`` is ``e^{λt}`` times the constant ``A = mean_k e^{λ o_
 averaged columns cost one evaluation per sample, not one per offset.
 
 Used by the calibration's design, the posterior's log-density (there with the fast
-:func:`whiskerid.model._trig.sincos`) and the per-window fits.
+:func:`whiskerid.posterior._trig.sincos`) and the per-window fits.
 """
 
+import functools
+
+import jax
 import jax.numpy as jnp
 
 
@@ -19,6 +22,9 @@ def decay_rates(omega, zeta):
     return zeta * omega, omega * jnp.sqrt(1.0 - zeta**2)
 
 
+# Jitted: called with concrete arrays (plots, checks, tests) each is one compiled program,
+# not one per operation; inside a traced function it is inlined.
+@jax.jit
 def conversion_average(sigma, wd, offsets):
     """``A = mean_k e^{λ o_k}`` (real and imaginary parts) over the averaging offsets.
 
@@ -35,6 +41,7 @@ def conversion_average(sigma, wd, offsets):
     return jnp.mean(e * jnp.cos(wd * off), axis=0), jnp.mean(e * jnp.sin(wd * off), axis=0)
 
 
+@functools.partial(jax.jit, static_argnames="sincos")
 def free_decay_columns(t, sigma, wd, offsets=None, *, sincos=None):
     """``e^{−σt} cos ω_d t`` and ``e^{−σt} sin ω_d t``, averaged over a conversion if asked.
 

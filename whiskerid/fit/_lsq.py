@@ -110,6 +110,9 @@ def residual_variance(r, n_params: int):
     return (r**2).sum() / max(r.size - n_params, 1)
 
 
+# Jitted: called on concrete Jacobians (reports, checks) each is one compiled program, not one
+# per operation; inside a traced function it is inlined.
+@jax.jit
 def scaled_inverse_gram(jac: jax.Array) -> jax.Array:
     """``(JᵀJ)⁺`` through the SVD of ``J`` with unit-norm columns (see :func:`covariance`)."""
     norms = jnp.linalg.norm(jac, axis=0)
@@ -129,12 +132,14 @@ def gradient_cosine(fn, y, args=None) -> jax.Array:
     return gradient_cosine_from(jax.jacfwd(lambda p: fn(p, args))(y), r)
 
 
+@jax.jit
 def gradient_cosine_from(jac: jax.Array, r: jax.Array) -> jax.Array:
     """:func:`gradient_cosine` from the Jacobian ``(n, p)`` and the residuals ``(n,)``."""
     norms = jnp.linalg.norm(jac, axis=0) * jnp.linalg.norm(r)
     return jnp.max(jnp.abs(jac.T @ r) / jnp.maximum(norms, jnp.finfo(r.dtype).tiny))
 
 
+@jax.jit
 def correlation(cov: jax.Array) -> jax.Array:
     """Correlation matrix of a covariance matrix."""
     sd = jnp.sqrt(jnp.diag(cov))

@@ -161,6 +161,10 @@ def _sigma_and_one_minus_sigma(beta):
     return sigma, one_minus
 
 
+# The modal helpers below are jitted: called with concrete arrays (plots, simulations, checks),
+# each is then one compiled program per shape instead of a dozen operations compiled one by
+# one; inside a traced function they are inlined as before.
+@functools.partial(jax.jit, static_argnames="derivative")
 def mode_shape(beta: PerMode, xi, derivative: int = 0):
     """Mode shapes ``φ_i`` (or their ``ξ``-derivatives) at ``ξ = x/l``.
 
@@ -198,6 +202,7 @@ def quadrature(n_modes: int) -> tuple[jax.Array, jax.Array]:
     return jnp.asarray(nodes), jnp.asarray(weights)
 
 
+@jax.jit
 def integral_of_shape(beta: PerMode) -> PerMode:
     """``∫₀¹ φ_i dξ`` in closed form."""
     sigma, one_minus = _sigma_and_one_minus_sigma(beta)
@@ -210,6 +215,7 @@ def integral_of_shape(beta: PerMode) -> PerMode:
     ) / beta
 
 
+@jax.jit
 def modal_mass_ratio(beta: PerMode, mu: Scalar | float) -> PerMode:
     """Modal mass over beam mass: ``∫₀¹ φ_i² dξ + μ φ_i(1)²``."""
     nodes, weights = quadrature(beta.shape[0])
@@ -217,6 +223,7 @@ def modal_mass_ratio(beta: PerMode, mu: Scalar | float) -> PerMode:
     return weights @ phi**2 + mu * mode_shape(beta, 1.0) ** 2
 
 
+@jax.jit
 def participation_factors(beta: PerMode, mu: Scalar | float) -> PerMode:
     """Mass-weighted participation factors ``Γ_i = ∫ m φ_i / ∫ m φ_i²`` (tip mass included).
 

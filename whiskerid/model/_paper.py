@@ -22,6 +22,7 @@ which overflow float64 for the fifth mode after about a second; their product is
 ``e^{−ζλt} 𝒞`` (the same value, algebraically) so long records stay finite.
 """
 
+import jax
 import jax.numpy as jnp
 
 from .._custom_types import Samples, ScalarLike, Times
@@ -43,6 +44,7 @@ def _denominator(d, ei, root):
     return d**4 * ei * root * bracket
 
 
+@jax.jit  # one program per shape when called with concrete arrays, not one per operation
 def paper_eq1(
     whisker: Whisker,
     t: Times,

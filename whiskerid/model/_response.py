@@ -142,6 +142,7 @@ def _damped(omega, zeta):
     return omega * jnp.sqrt(1.0 - zeta**2)
 
 
+@jax.jit  # one program per shape when called with concrete arrays, not one per operation
 def _free(params: ModalParams, t, q0, v0):
     """Closed-form free response of each mode (broadcast over ``t[:, None]``)."""
     omega, zeta, _ = params

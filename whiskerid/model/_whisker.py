@@ -20,6 +20,7 @@ from typing import Literal
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._custom_types import PerMode, Scalar
 from ._modes import cantilever_roots
@@ -65,7 +66,7 @@ class Whisker(eqx.Module):
                 )
         if self.zeta.ndim != 1 or self.zeta.shape[0] < 1:
             raise ValueError(f"Whisker.zeta must have shape (modes,), got {self.zeta.shape}")
-        if _is_concrete(self.length_m, self.EI, self.rho_a, self.zeta, self.sensor_x_m):
+        if _is_concrete(*(getattr(self, name) for name in _VALUE_FIELDS)):
             _check_values(self)
 
     @property
@@ -91,7 +92,7 @@ class Whisker(eqx.Module):
     @property
     def omega_rad_s(self) -> PerMode:
         """Undamped natural angular frequencies ``ω_i = β_i² sqrt(κ)/l²`` (rad/s)."""
-        return self.beta**2 * jnp.sqrt(self.kappa) / self.length_m**2
+        return _omega(self.beta, self.EI, self.rho_a, self.length_m)
 
     @property
     def natural_frequencies_hz(self) -> PerMode:
@@ -109,27 +110,39 @@ class Whisker(eqx.Module):
         return eqx.tree_at(lambda w: w.zeta, self, zeta[:n_modes])
 
 
+@jax.jit  # one program when the whisker is concrete, not one per operation
+def _omega(beta, ei, rho_a, length_m):
+    return beta**2 * jnp.sqrt(ei / rho_a) / length_m**2
+
+
 def _check_values(w: Whisker) -> None:
-    """Refuse non-physical values, naming the field."""
+    """Refuse non-physical values, naming the field.
+
+    The values are concrete here, so NumPy reads them: JAX operations would each be compiled,
+    and a whisker is built for every fit, simulation and plot.
+    """
+    v = {name: np.asarray(getattr(w, name), dtype=float) for name in _VALUE_FIELDS}
     checks = [
-        ("length_m", float(w.length_m) > 0, "must be positive"),
-        ("EI", float(w.EI) > 0, "must be positive"),
-        ("rho_a", float(w.rho_a) > 0, "must be positive"),
-        ("tip_mass_kg", float(w.tip_mass_kg) >= 0, "must be zero or positive"),
-        ("zeta", bool(jnp.all((w.zeta >= 0) & (w.zeta < 1))), "must satisfy 0 <= zeta < 1"),
+        ("length_m", v["length_m"] > 0, "must be positive"),
+        ("EI", v["EI"] > 0, "must be positive"),
+        ("rho_a", v["rho_a"] > 0, "must be positive"),
+        ("tip_mass_kg", v["tip_mass_kg"] >= 0, "must be zero or positive"),
+        ("zeta", np.all((v["zeta"] >= 0) & (v["zeta"] < 1)), "must satisfy 0 <= zeta < 1"),
         (
             "sensor_x_m",
-            0 <= float(w.sensor_x_m) <= float(w.length_m),
-            f"must lie on the beam, between 0 and length_m = {float(w.length_m)} m",
+            0 <= v["sensor_x_m"] <= v["length_m"],
+            f"must lie on the beam, between 0 and length_m = {float(v['length_m'])} m",
         ),
     ]
     for name, ok, why in checks:
-        if not ok or not bool(jnp.all(jnp.isfinite(getattr(w, name)))):
-            raise ValueError(f"{name} = {_show(getattr(w, name))} {why}")
+        if not ok or not np.all(np.isfinite(v[name])):
+            raise ValueError(f"{name} = {_show(v[name])} {why}")
 
 
-def _show(x) -> str:
-    x = jnp.asarray(x)
+_VALUE_FIELDS = ("length_m", "EI", "rho_a", "tip_mass_kg", "zeta", "sensor_x_m")
+
+
+def _show(x: np.ndarray) -> str:
     return repr(float(x)) if x.ndim == 0 else repr([float(v) for v in x])
 
 

@@ -53,7 +53,7 @@ def _horner(z, coeffs):
 
 
 @jax.custom_jvp
-def sincos(x):
+def _sincos(x):
     """``(sin x, cos x)`` of a float64 array, elementwise.
 
     Args:
@@ -80,8 +80,12 @@ def sincos(x):
     return jnp.where(bad, jnp.nan, sin), jnp.where(bad, jnp.nan, cos)
 
 
-@sincos.defjvp
+@_sincos.defjvp
 def _sincos_jvp(primals, tangents):
     (x,), (dx,) = primals, tangents
-    s, c = sincos(x)
+    s, c = _sincos(x)
     return (s, c), (c * dx, -s * dx)
+
+
+#: Jitted: called with a concrete array it is one compiled program, not one per operation.
+sincos = jax.jit(_sincos)
