@@ -1,12 +1,15 @@
 """Test configuration: float64 everywhere (the models need it), compiled code freed when a
-process grows large, quick compilation.
+process grows large, quick compilation for the default run.
 
-The tests compile hundreds of small programs that each run for milliseconds: compiling them
-dominates the suite's time, so LLVM's optimisation of the generated machine code is turned down
-(``--xla_backend_optimization_level=0`` in ``XLA_FLAGS``, set before JAX starts and inherited
-by the workers and by the commands the tests run). The programs compute the same thing; what
-changes is how fast their machine code runs, which the tests do not measure (results may differ
-in the last bits, far below any test's tolerance).
+The default run compiles hundreds of small programs that each run for milliseconds: compiling
+them dominates its time, so LLVM's optimisation of the generated machine code is turned down
+(``--xla_backend_optimization_level=0`` in ``XLA_FLAGS``, set before JAX compiles anything and
+inherited by the workers and by the commands the tests run). The programs compute the same
+thing; what changes is how fast their machine code runs, which the tests do not measure
+(results may differ in the last bits, far below any test's tolerance). ``pytest -m slow`` keeps
+XLA's full optimisation: its checks run long programs (seeded repeats of fits with hundreds of
+solver steps, sampling), which quick machine code makes several times slower. An
+optimisation level already in ``XLA_FLAGS`` is left as it is.
 
 JAX's persistent compilation cache points at a folder made for this run (removed at its end):
 a test after compiled code was freed loads what an earlier test compiled instead of
@@ -14,17 +17,14 @@ compiling it again, and with ``pytest -n 2`` (pytest-xdist) one worker loads wha
 compiled. Nothing is kept between runs, so every run is a cold start.
 """
 
+import ctypes
 import gc
 import os
 import shutil
 import tempfile
 
-_QUICK = "--xla_backend_optimization_level=0"
-if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {_QUICK}".strip()
-
-import jax  # noqa: E402  (after XLA_FLAGS: JAX reads it when it starts)
-import pytest  # noqa: E402
+import jax
+import pytest
 
 jax.config.update("jax_enable_x64", True)
 
@@ -38,6 +38,18 @@ os.environ["WHISKERID_COMPILE_CACHE"] = _CACHE
 jax.config.update("jax_compilation_cache_dir", _CACHE)
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
 jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+
+
+_QUICK = "--xla_backend_optimization_level=0"
+
+
+def pytest_configure(config):
+    """Quick compilation unless only the slow checks run (JAX reads ``XLA_FLAGS`` when it
+    first compiles, after this hook; the workers and commands inherit it)."""
+    flags = os.environ.get("XLA_FLAGS", "")
+    if "xla_backend_optimization_level" in flags or config.option.markexpr.strip() == "slow":
+        return
+    os.environ["XLA_FLAGS"] = f"{flags} {_QUICK}".strip()
 
 
 def pytest_sessionfinish(session, exitstatus):
@@ -86,3 +98,13 @@ def _resident_bytes() -> int | None:
 def _free():
     jax.clear_caches()
     gc.collect()
+    _malloc_trim()
+
+
+def _malloc_trim() -> None:
+    """Hand the heap that freed code leaves back to the system (glibc keeps it otherwise, and
+    the process stays as large as it ever was); a no-op where there is no glibc."""
+    try:
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):
+        pass

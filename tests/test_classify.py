@@ -191,12 +191,21 @@ def _tone_csvs(root, runs: int, seed: int = 2) -> None:
                          wi.Recording(t=t, columns={"hall": x}, meta={"rate_hz": 200}))  # fmt: skip
 
 
-def test_cli_evaluate_names_the_recordings_labelled_wrong(tmp_path, capsys):
+@pytest.fixture(scope="module")
+def tone_model(tmp_path_factory):
+    """A model trained by ``whiskerid train`` on :func:`_tone_csvs` (3 runs of each tone),
+    and its dataset: ``(dataset folder, model folder)``. Tests read both, never write them."""
+    root = tmp_path_factory.mktemp("tones")
+    _tone_csvs(root / "ds", runs=3)
+    model = root / "m"
+    assert main(["train", str(root / "ds"), "--out", str(model), "--hidden", "8",
+                 "--max-epochs", "40"]) == 0  # fmt: skip
+    return root / "ds", model
+
+
+def test_cli_evaluate_names_the_recordings_labelled_wrong(tone_model, tmp_path, capsys):
     """A 60 Hz recording filed under ``low`` is the one recording labelled wrong whole."""
-    _tone_csvs(tmp_path / "train", runs=3)
-    model = tmp_path / "m"
-    args = ["--out", str(model), "--hidden", "8", "--max-epochs", "40"]
-    assert main(["train", str(tmp_path / "train"), *args]) == 0
+    _, model = tone_model
     _tone_csvs(tmp_path / "test", runs=2, seed=5)
     (tmp_path / "test" / "high" / "high1.csv").rename(tmp_path / "test" / "low" / "misfiled.csv")
     capsys.readouterr()
@@ -210,14 +219,11 @@ def test_cli_evaluate_names_the_recordings_labelled_wrong(tmp_path, capsys):
     assert "labelled wrong whole: low/misfiled.csv as high" in captured.err
 
 
-def test_cli_classify_plot(tmp_path, capsys):
+def test_cli_classify_plot(tone_model, tmp_path, capsys):
     """``classify --plot`` saves the signal and its labels over time, under exactly the
     name given; a --plot naming an input is refused before anything is written."""
-    _tone_csvs(tmp_path / "ds", runs=2)
-    model = tmp_path / "m"
-    assert main(["train", str(tmp_path / "ds"), "--out", str(model), "--hidden", "8",
-                 "--max-epochs", "40"]) == 0  # fmt: skip
-    rec, png = tmp_path / "ds" / "high" / "high0.csv", tmp_path / "plots" / "high0.png"
+    ds, model = tone_model
+    rec, png = ds / "high" / "high0.csv", tmp_path / "plots" / "high0.png"
     capsys.readouterr()
     assert main(["classify", str(model), str(rec), "--plot", str(png), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
@@ -228,7 +234,7 @@ def test_cli_classify_plot(tmp_path, capsys):
     bare = tmp_path / "labels"  # no suffix: written under exactly that name, as PNG
     assert main(["classify", str(model), str(rec), "--plot", str(bare)]) == 0
     assert bare.read_bytes()[:4] == b"\x89PNG" and not bare.with_suffix(".png").exists()
-    assert main(["evaluate", str(model), str(tmp_path / "ds"), "--plot", str(model)]) == 2
+    assert main(["evaluate", str(model), str(ds), "--plot", str(model)]) == 2
     assert "is also the input MODEL" in capsys.readouterr().err
 
 

@@ -45,7 +45,8 @@ def test_modal_analysis_figure_peaks(fb):
     assert found[3e-4][0].amplitude / found[1e-4][0].amplitude == pytest.approx(3.0, rel=1e-6)
 
 
-def test_notes_example_peaks_at_54_100_146():
+def test_paper_whisker_driven_at_100_hz_peaks_at_54_100_146():
+    """Eq. 1 as printed: the drive and side bands at ``f_b ± f_d1`` (46 Hz), not a resonance."""
     t = np.arange(20_000) / 20_000.0
     y = np.asarray(wi.paper_eq1(wi.paper_whisker(), jnp.asarray(t), fb_hz=100.0, hb_m=1e-4))
     got = sorted(round(p.frequency_hz) for p in wi.dominant_peaks(t, y, n=3))
