@@ -8,7 +8,7 @@ inherited by the workers and by the commands the tests run). The programs comput
 thing; what changes is how fast their machine code runs, which the tests do not measure
 (results may differ in the last bits, far below any test's tolerance). ``pytest -m slow`` keeps
 XLA's full optimisation: its checks run long programs (seeded repeats of fits with hundreds of
-solver steps, sampling), which quick machine code makes several times slower. An
+solver steps, sampling), where slower machine code costs more than quicker compiles save. An
 optimisation level already in ``XLA_FLAGS`` is left as it is.
 
 JAX's persistent compilation cache points at a folder made for this run (removed at its end):
