@@ -63,7 +63,8 @@ def test_class_weights_change_nothing_when_balanced_and_lift_a_minority():
     assert TrainConfig().balance and not _mlp.PAPER_CONFIG.balance
 
 
-def test_train_refuses_negative_regularisation_before_reading(tmp_path, capsys):
+def test_train_refuses_bad_settings_before_reading(tmp_path, capsys):
+    """Each bad setting is named, and refused before the (here missing) dataset is read."""
     args = ["train", str(tmp_path / "none"), "--out", str(tmp_path / "m")]
     assert main([*args, "--weight-decay", "-1"]) == 2
     assert "--weight-decay must be a finite number at least 0" in capsys.readouterr().err
@@ -71,6 +72,10 @@ def test_train_refuses_negative_regularisation_before_reading(tmp_path, capsys):
     assert "--input-noise must be a finite number at least 0" in capsys.readouterr().err
     assert main([*args, "--cv", "1"]) == 2
     assert "--cv must be at least 2 folds" in capsys.readouterr().err
+    assert main([*args, "--span-whiskers", "-1"]) == 2
+    assert "--span-whiskers must be 0 or more, not -1" in capsys.readouterr().err
+    assert main([*args, "--span-whiskers", "2"]) == 2
+    assert "--span-whiskers goes with --whisker" in capsys.readouterr().err
 
 
 def test_full_batch_and_fixed_epoch_refit():

@@ -125,6 +125,11 @@ def run(args) -> dict:
         raise CommandError("--modal-fit goes with --features fitted")
     if args.cv is not None and args.cv < 2:
         raise CommandError(f"--cv must be at least 2 folds, not {args.cv}")
+    if args.span_whiskers is not None and args.span_whiskers < 0:
+        raise CommandError(f"--span-whiskers must be 0 or more, not {args.span_whiskers}")
+    if args.span_whiskers and args.whisker is None:
+        raise CommandError("--span-whiskers goes with --whisker (the calibrated whisker that "
+                           "made the recordings)")  # fmt: skip
     # Settings first: bad ones are refused before the data is read.
     config = _config(args)
     ws = load_dataset(args.dataset, channel=args.channel, window_s=args.window,
@@ -132,11 +137,6 @@ def run(args) -> dict:
     hop = None if args.hop is None else round(args.hop * ws.rate_hz)
     use_speed = False if args.no_speed else None
     whisker = _whisker(args.whisker, ws)
-    if args.span_whiskers is not None and args.span_whiskers < 0:
-        raise CommandError(f"--span-whiskers must be 0 or more, not {args.span_whiskers}")
-    if args.span_whiskers and whisker is None:
-        raise CommandError("--span-whiskers goes with --whisker (the calibrated whisker that "
-                           "made the recordings)")  # fmt: skip
     cv = None
     if args.cv is not None:
         cv = cross_validate(ws, features=args.features, folds=args.cv, seed=args.seed,
