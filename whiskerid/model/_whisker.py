@@ -92,7 +92,7 @@ class Whisker(eqx.Module):
     @property
     def omega_rad_s(self) -> PerMode:
         """Undamped natural angular frequencies ``ω_i = β_i² sqrt(κ)/l²`` (rad/s)."""
-        return _omega(self.beta, self.EI, self.rho_a, self.length_m)
+        return _omega(self.beta, self.kappa, self.length_m)
 
     @property
     def natural_frequencies_hz(self) -> PerMode:
@@ -111,8 +111,8 @@ class Whisker(eqx.Module):
 
 
 @jax.jit  # one program when the whisker is concrete, not one per operation
-def _omega(beta, ei, rho_a, length_m):
-    return beta**2 * jnp.sqrt(ei / rho_a) / length_m**2
+def _omega(beta, kappa, length_m):
+    return beta**2 * jnp.sqrt(kappa) / length_m**2
 
 
 def _check_values(w: Whisker) -> None:
