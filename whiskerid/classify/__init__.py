@@ -2,7 +2,8 @@
 context fusion and model files.
 
 The modules, along the data path: ``_dataset`` (recordings → labelled windows at one rate),
-``_features`` (a feature vector per window), ``_mlp`` (the network and its training loop),
+``_features`` (a feature vector per window; its settings in ``_features_spec``, its
+whisker-aware filters in ``_features_whisker``), ``_mlp`` (the network and its training loop),
 ``_split`` (splits and folds by recording), ``_train`` (a :class:`ClassifierModel` from
 windows), ``_model_file`` (the model, its compiled predict functions and its files),
 ``_whisker`` (the whisker's own transfer function, divided out of whisker-aware

@@ -23,7 +23,7 @@ from ..model import (
     observe,
     pluck,
 )
-from ._terrain import PLANE_COLUMNS, SensorPlanes
+from ._sensor import PLANE_COLUMNS, SensorPlanes
 
 #: Excitations a two-plane recording can have.
 PLANE_EXCITATIONS = ("decay", "sine", "base")
