@@ -1,6 +1,19 @@
 """The terrain simulator: profiles, wheels, drivetrain, and the whisker's response to them."""
 
 from .. import _jax_setup as _jax_setup
+from ._contact import ContactInputs as ContactInputs
+from ._contact import ContactModes as ContactModes
+from ._contact import ContactParams as ContactParams
+from ._contact import ContactResult as ContactResult
+from ._contact import contact_modes as contact_modes
+from ._contact import simulate_contact as simulate_contact
+from ._contact import static_state as static_state
+from ._contact_runs import TERRAIN_CONTACT as TERRAIN_CONTACT
+from ._contact_runs import TerrainContact as TerrainContact
+from ._contact_runs import contact_motion as contact_motion
+from ._contact_runs import contact_params as contact_params
+from ._contact_runs import iter_contact_runs as iter_contact_runs
+from ._contact_runs import perturbation_hz as perturbation_hz
 from ._motion import LATERAL_MODEL as LATERAL_MODEL
 from ._motion import base_acceleration as base_acceleration
 from ._motion import base_acceleration_planes as base_acceleration_planes
