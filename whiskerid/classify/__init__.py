@@ -41,6 +41,9 @@ from ._mlp import default_config as default_config
 from ._model_file import ClassifierModel as ClassifierModel
 from ._model_file import ModelError as ModelError
 from ._model_file import trained_on as trained_on
+from ._sidebands import sideband_test as sideband_test
+from ._sidebands import welch_dof as welch_dof
+from ._sidebands import welch_power as welch_power
 from ._split import grouped_split as grouped_split
 from ._split import recording_folds as recording_folds
 from ._split import split_by_recording as split_by_recording

@@ -1,14 +1,30 @@
-"""The paper's spectral analysis of a dataset: dominant frequency components per terrain and
-speed, and whether they tell terrains and speeds apart.
+"""The paper's spectral analysis of a dataset, and its claim tested.
 
-The paper reports that the whisker's vibration has a dominant frequency "sandwiched by two
-other less dominant but distinct frequency components", and that the dominant components are
-unique to the terrain and the robot's speed. :func:`analyze_dataset` measures both on a
-dataset: per recording, the averaged amplitude spectrum (Welch: Hann segments, half
-overlapping) and its largest peaks; per terrain and speed, the peaks of the mean spectrum of
-its recordings and the spread of the recordings' dominant frequency. Two groups are told apart
-by their dominant frequency when the two means differ by more than twice the combined spread
-(about 2σ: the recordings of one would seldom be taken for the other's).
+The paper reports that, at steady state, the whisker's vibration has a dominant frequency
+at the robot's vertical perturbation frequency "sandwiched by two other less dominant but
+distinct frequency components", and that the dominant components are unique to the
+terrain and the robot's speed. :func:`analyze_dataset` measures each part per terrain and
+speed:
+
+* the **dominant line**: the largest peak of the group's mean Welch spectrum, each
+  recording's own, and their spread;
+* the **perturbation frequency** ``f_b``: from the recordings' ``perturbation_hz``
+  metadata (the contact simulator writes it), or given, or from the speed and the wheel
+  geometry (``per_rev · v/(π D)``: ``per_rev`` perturbations per wheel revolution, e.g.
+  the gear ratio for a motor shaft's tone); whether the dominant line is at ``f_b``
+  (within two bins);
+* **sidebands** at ``f_b ± Δ`` (around the dominant line when ``f_b`` is unknown): the
+  statistical test of :func:`whiskerid.classify.sideband_test` on non-overlapping windows
+  of the group's recordings (amplitude against the local noise floor, symmetry of
+  ``Δ``, consistency across windows; a p-value). A group is *sandwiched* when its
+  sidebands are present by that test (not merely when the dominant peak lies between the
+  next two largest, which one time in three it does by chance);
+* whether terrains (at one speed) and speeds (on one terrain) are told apart by their
+  dominant frequency: the two means differ by more than twice the combined spread.
+
+The claim holds when there are terrain pairs and speed pairs to compare and at least 90 %
+of each are told apart, at least 90 % of the groups are sandwiched, and, where ``f_b`` is
+known, at least 90 % of the groups have their dominant line at ``f_b``.
 """
 
 from itertools import combinations
@@ -18,6 +34,7 @@ import numpy as np
 
 from ..io import RecordingError, read_recording
 from ._dataset import list_dataset, recording_rate, recording_signal, recording_speed, windows_of
+from ._sidebands import sideband_test, welch_dof, welch_power
 
 
 def _spectrum(rec, channel, rate_hz, segment_s):
@@ -49,6 +66,30 @@ def _peaks(freqs, amps, n):
                       min_relative=1e-3)  # fmt: skip
 
 
+def _window_powers(rec, channel, rate_hz, segment_s):
+    """Welch power spectra of the recording's non-overlapping windows of three
+    half-overlapping segments: ``(powers, k)``."""
+    x = recording_signal(rec, channel, only_column_ok=True)
+    n = round(segment_s * rate_hz)
+    wins, _ = windows_of(rec.t, x, rate_hz=rate_hz, window=2 * n, hop=2 * n)
+    if len(wins) == 0:
+        return np.zeros((0, n // 2 + 1)), 3
+    out = [welch_power(w, n) for w in wins]
+    return np.stack([p for p, _ in out]), out[0][1]
+
+
+def _perturbation(recs, speed, given_hz, per_rev, wheel_diameter_m):
+    """``(f_b, source)`` of a group (see the module docstring)."""
+    meta = [float(r.meta["perturbation_hz"]) for r in recs if "perturbation_hz" in r.meta]
+    if meta and len(meta) == len(recs):
+        return float(np.mean(meta)), "metadata"
+    if given_hz is not None:
+        return float(given_hz), "given"
+    if per_rev is not None and speed is not None:
+        return per_rev * speed / (np.pi * wheel_diameter_m), "speed and wheel geometry"
+    return None, None
+
+
 def analyze_dataset(
     root: str | Path,
     *,
@@ -57,29 +98,39 @@ def analyze_dataset(
     rate_hz: float | None = None,
     n_components: int = 3,
     time_col: str = "t",
+    perturbation_hz: float | None = None,
+    per_rev: float | None = None,
+    wheel_diameter_m: float = 0.070,
+    alpha: float = 0.01,
 ) -> dict:
-    """Dominant frequency components per terrain and speed, and the paper's claim checked.
+    """Dominant frequency components per terrain and speed, and the paper's claim tested.
 
     Args:
         root: A dataset folder ``ROOT/<label>/<recording>``; recordings without
             ``speed_mps`` metadata form one group per label (speed ``None``).
         channel: Column to analyse (each recording's first signal column by default).
         segment_s: Length of the Welch segments (s): the frequency resolution is its
-            reciprocal.
+            reciprocal. The sideband test's windows are two segments long.
         rate_hz: Rate to resample to; the first recording's by default.
         n_components: Spectral peaks reported per group (the dominant one first).
         time_col: Name of the recordings' time column.
+        perturbation_hz: The perturbation frequency (Hz), for recordings without
+            ``perturbation_hz`` metadata.
+        per_rev: Perturbations per wheel revolution: ``f_b = per_rev · v/(π D)`` from each
+            group's speed, when neither metadata nor ``perturbation_hz`` give it.
+        wheel_diameter_m: ``D`` (m).
+        alpha: Significance level of the sideband test.
 
     Returns:
         A JSON-able dict: ``groups`` (per terrain, per speed: ``components`` as
         ``[frequency_hz, amplitude]`` of the mean spectrum's largest peaks, its dominant one
-        ``dominant_hz``, each recording's own (``recording_dominant_hz``) and their standard
-        deviation ``dominant_spread_hz``, ``sandwiched``: whether the
-        dominant component lies between the next two, and ``recordings``), ``claim``
-        (``terrains_told_apart``: the share of terrain pairs at one speed whose dominant
-        frequencies differ by more than twice the combined spread, ``speeds_told_apart``:
-        the same for speed pairs of one terrain, ``sandwiched``: the share of groups whose
-        dominant component is sandwiched, and ``verdict`` in words), and the settings.
+        ``dominant_hz``, each recording's own (``recording_dominant_hz``) and their
+        standard deviation ``dominant_spread_hz``, ``perturbation_hz`` and its
+        ``perturbation_source``, ``dominant_at_perturbation``, ``sidebands`` (the test's
+        result, :func:`sideband_test`), ``sandwiched`` (sidebands present), ``verdict``
+        in words, and ``recordings``), ``claim`` (``terrains_told_apart``,
+        ``speeds_told_apart``, ``sandwiched``, ``dominant_at_perturbation``: shares, and
+        ``verdict`` in words), and the settings.
     """
     files = list_dataset(root)
     per_group: dict[tuple[str, float | None], list] = {}
@@ -90,36 +141,75 @@ def analyze_dataset(
             rate = recording_rate(rec) if rate is None else rate
             speed = recording_speed(rec)
             key = (label, round(speed, 4) if np.isfinite(speed) else None)
-            per_group.setdefault(key, []).append(_spectrum(rec, channel, rate, segment_s))
+            per_group.setdefault(key, []).append(
+                (rec, _spectrum(rec, channel, rate, segment_s),
+                 _window_powers(rec, channel, rate, segment_s)))  # fmt: skip
     groups: dict[str, dict] = {}
     summary = {}
+    fb_args = (perturbation_hz, per_rev, wheel_diameter_m)
 
     def order(item):
         (label, speed), _ = item
         return label, speed or 0.0
 
-    for (label, speed), spectra in sorted(per_group.items(), key=order):
-        freqs = spectra[0][0]
-        mean = np.mean([a for _, a in spectra], axis=0)
-        comps = _peaks(freqs, mean, n_components)
-        dominant = [_peaks(f, a, 1)[0].frequency_hz for f, a in spectra if _peaks(f, a, 1)]
-        spread = float(np.std(dominant, ddof=1)) if len(dominant) > 1 else float(freqs[1])
-        lo_hi = sorted(c.frequency_hz for c in comps[1:3])
-        sandwiched = len(lo_hi) == 2 and lo_hi[0] < comps[0].frequency_hz < lo_hi[1]
-        entry = {
-            "components": [[round(c.frequency_hz, 3), float(f"{c.amplitude:.4g}")]
-                           for c in comps],
-            "dominant_hz": round(comps[0].frequency_hz if comps else float("nan"), 3),
-            "recording_dominant_hz": [round(f, 3) for f in dominant],
-            "dominant_spread_hz": round(max(spread, float(freqs[1]) / 2), 3),
-            "sandwiched": bool(sandwiched),
-            "recordings": len(spectra),
-        }  # fmt: skip
+    for (label, speed), items in sorted(per_group.items(), key=order):
+        entry = _group(items, speed, segment_s, n_components, fb_args, alpha)
         groups.setdefault(label, {})[str(speed)] = entry
         summary[(label, speed)] = entry
-    claim = _claim(summary)
+    claim = _claim(summary, alpha)
     return {"groups": groups, "claim": claim, "segment_s": segment_s, "rate_hz": rate,
-            "resolution_hz": round(1.0 / segment_s, 4), "channel": channel}  # fmt: skip
+            "resolution_hz": round(1.0 / segment_s, 4), "channel": channel,
+            "alpha": alpha}  # fmt: skip
+
+
+def _group(items, speed, segment_s, n_components, fb_args, alpha) -> dict:
+    spectra = [s for _, s, _ in items]
+    freqs = spectra[0][0]
+    df = float(freqs[1])
+    mean = np.mean([a for _, a in spectra], axis=0)
+    comps = _peaks(freqs, mean, n_components)
+    dominant = [_peaks(f, a, 1)[0].frequency_hz for f, a in spectra if _peaks(f, a, 1)]
+    spread = float(np.std(dominant, ddof=1)) if len(dominant) > 1 else df
+    dom = comps[0].frequency_hz if comps else float("nan")
+    fb, source = _perturbation([r for r, _, _ in items], speed, *fb_args)
+    powers = np.concatenate([p for _, _, (p, _) in items])
+    k = items[0][2][1]
+    carrier = fb if fb is not None else dom
+    if powers.shape[0] == 0 or not np.isfinite(carrier):
+        bands = {"present": False, "p_value": 1.0, "windows": int(powers.shape[0]),
+                 "reason": "recordings shorter than two segments"}  # fmt: skip
+    else:
+        bands = sideband_test(powers, df, carrier, welch_dof(k), alpha=alpha)
+    at_fb = None if fb is None or not np.isfinite(dom) else bool(abs(dom - fb) <= 2 * df)
+    return {
+        "components": [[round(c.frequency_hz, 3), float(f"{c.amplitude:.4g}")] for c in comps],
+        "dominant_hz": round(dom, 3),
+        "recording_dominant_hz": [round(f, 3) for f in dominant],
+        "dominant_spread_hz": round(max(spread, df / 2), 3),
+        "perturbation_hz": None if fb is None else round(fb, 4),
+        "perturbation_source": source,
+        "dominant_at_perturbation": at_fb,
+        "sidebands": bands,
+        "sandwiched": bool(bands["present"]),
+        "verdict": _group_words(dom, fb, at_fb, bands),
+        "recordings": len(items),
+    }  # fmt: skip
+
+
+def _group_words(dom, fb, at_fb, bands) -> str:
+    words = [f"dominant {dom:.2f} Hz"]
+    if fb is not None:
+        words.append(f"{'at' if at_fb else 'not at'} the perturbation {fb:.2f} Hz")
+    if bands.get("delta_hz") is None:
+        words.append("no sideband test (" + bands.get("reason", "no windows") + ")")
+    elif bands["present"]:
+        words.append(f"symmetric sidebands at ±{bands['delta_hz']:.2f} Hz (p = "
+                     f"{bands['p_value']:.2g}, {bands['level_db']:.1f} dB re carrier)")  # fmt: skip
+    else:
+        words.append(f"no sidebands (best ±{bands['delta_hz']:.2f} Hz: p = "
+                     f"{bands['p_value']:.2g}, consistency "
+                     f"{bands['consistency']:.2f})")  # fmt: skip
+    return "; ".join(words)
 
 
 def _apart(a: dict, b: dict) -> bool:
@@ -127,7 +217,7 @@ def _apart(a: dict, b: dict) -> bool:
     return gap > 2 * float(np.hypot(a["dominant_spread_hz"], b["dominant_spread_hz"]))
 
 
-def _claim(summary: dict) -> dict:
+def _claim(summary: dict, alpha: float) -> dict:
     speeds = sorted({s for _, s in summary if s is not None})
     labels = sorted({lab for lab, _ in summary})
     same_speed = [_apart(summary[(a, s)], summary[(b, s)])
@@ -137,17 +227,26 @@ def _claim(summary: dict) -> dict:
                   for lab in labels for s, u in combinations(speeds, 2)
                   if (lab, s) in summary and (lab, u) in summary]  # fmt: skip
     sandwiched = [e["sandwiched"] for e in summary.values()]
+    at_fb = [e["dominant_at_perturbation"] for e in summary.values()
+             if e["dominant_at_perturbation"] is not None]  # fmt: skip
     share = {"terrains_told_apart": _share(same_speed), "speeds_told_apart": _share(same_label),
-             "sandwiched": _share(sandwiched)}  # fmt: skip
+             "sandwiched": _share(sandwiched),
+             "dominant_at_perturbation": _share(at_fb)}  # fmt: skip
     words = []
     for key, what in (("terrains_told_apart", "terrain pairs at one speed"),
                       ("speeds_told_apart", "speed pairs on one terrain")):  # fmt: skip
         if share[key] is not None:
             words.append(f"{100 * share[key]:.0f} % of {what} have distinct dominant frequencies")
+    if share["dominant_at_perturbation"] is not None:
+        words.append(f"the dominant line is at the perturbation frequency in "
+                     f"{100 * share['dominant_at_perturbation']:.0f} % of the groups")  # fmt: skip
     if share["sandwiched"] is not None:
-        words.append(f"the dominant component is sandwiched by the next two in "
+        words.append(f"symmetric sidebands (p < {alpha:g}) sandwich it in "
                      f"{100 * share['sandwiched']:.0f} % of the groups")  # fmt: skip
-    holds = all(v is not None and v >= 0.9 for k, v in share.items() if k != "sandwiched")
+    told = ("terrains_told_apart", "speeds_told_apart")
+    holds = all(share[k] is not None and share[k] >= 0.9 for k in told) and all(
+        v is None or v >= 0.9 for k, v in share.items() if k not in told
+    )
     share["verdict"] = ("the claim holds: " if holds else "the claim does not hold in full: ") + (
         "; ".join(words) or "no groups to compare"
     )

@@ -45,6 +45,15 @@ def add_parser(sub) -> None:
                    "(hall_a vertical, hall_b lateral: the paper's two orthogonal sensors; "
                    "the record's [planes] table sets the lateral plane, gains, offsets and "
                    "cross-talk)")  # fmt: skip
+    s.add_argument("--contact", action="store_true",
+                   help="put the whisker's tip on the ground: unilateral Hunt-Crossley contact "
+                   "and smoothed Coulomb friction per terrain, integrated with diffrax (one "
+                   "Hall sensor; about 1 s of computing per simulated second and run on a "
+                   "laptop CPU); each recording's metadata gains contact, perturbation_hz, "
+                   "contact_fraction and stick_fraction")  # fmt: skip
+    s.add_argument("--preload", type=float, default=1.0, metavar="MM",
+                   help="with --contact: how far the undeformed tip would sink into the mean "
+                   "ground (mm): sets the static contact force")  # fmt: skip
     s.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     s.set_defaults(func=run)
 
@@ -59,13 +68,19 @@ def run(args) -> dict:
                   folders=("--out",))  # fmt: skip
     if args.runs < 1 or args.duration <= 0:
         raise CommandError("--runs must be >= 1 and --duration > 0")
+    if args.contact and args.channels != 1:
+        raise CommandError("--contact simulates one Hall sensor: drop --channels 2")
+    if not 0 < args.preload < 20:
+        raise CommandError(f"--preload {args.preload:g} mm: give a depth between 0 and 20 mm")
     record = record_or_paper(args.whisker)
     paths = synthesize_dataset(args.out, record=record, terrains=tuple(args.terrains),
                                speeds=tuple(args.speeds), runs=args.runs,
                                duration_s=args.duration, seed=args.seed,
                                replace_synthetic=args.force,
-                               channels=args.channels)  # fmt: skip
+                               channels=args.channels, contact=args.contact,
+                               preload_m=args.preload * 1e-3)  # fmt: skip
     say(f"wrote {len(paths)} recordings to {args.out}")
     return {"out": str(args.out), "recordings": len(paths), "terrains": args.terrains,
             "speeds_mps": args.speeds, "runs": args.runs, "duration_s": args.duration,
-            "channels": args.channels}  # fmt: skip
+            "channels": args.channels, "contact": args.contact,
+            "preload_mm": args.preload if args.contact else None}  # fmt: skip

@@ -14,3 +14,4 @@ from ._plot import plot_signal_and_spectrum as plot_signal_and_spectrum
 from ._plot import real_peaks as real_peaks
 from ._posterior import plot_corner as plot_corner
 from ._posterior import plot_trace as plot_trace
+from ._sidebands import plot_sidebands as plot_sidebands

@@ -39,9 +39,6 @@ Amplitude-dependent modes: the modal restoring force is
 in by subclassing :class:`ContactModes` and overriding it (e.g. ``ω²(q + γq³)``).
 """
 
-from collections.abc import Callable
-
-import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -266,7 +263,7 @@ def simulate_contact(
     rtol: float = 1e-6,
     atol: float = 1e-10,
     max_steps: int = 2_000_000,
-    solver: Callable[[], diffrax.AbstractSolver] = diffrax.Tsit5,
+    solver=None,
 ) -> ContactResult:
     """Integrate the whisker with its tip on the ground from ``t_out[0]`` to ``t_out[-1]``.
 
@@ -283,12 +280,14 @@ def simulate_contact(
         rtol: Relative tolerance.
         atol: Absolute tolerance.
         max_steps: Step budget.
-        solver: A diffrax solver class (an implicit one, e.g. ``diffrax.Kvaerno5``, for
-            very stiff contacts).
+        solver: A diffrax solver instance; ``diffrax.Tsit5()`` by default (an implicit
+            one, e.g. ``diffrax.Kvaerno5()``, for very stiff contacts).
     """
+    import diffrax  # here: importing the terrain package does not load diffrax
+
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(_vector_field),
-        solver(),
+        diffrax.Tsit5() if solver is None else solver,
         t0=t_out[0],
         t1=t_out[-1],
         dt0=inputs.dt / 4,

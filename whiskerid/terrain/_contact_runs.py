@@ -72,7 +72,6 @@ from ._sensor import amplified_hall
 
 TIP_AHEAD_M = 0.04  # the tip's contact point ahead of the front axle (m)
 TIP_RADIUS_M = 0.002  # radius of the silicone tip (m)
-_SOURCE = "whiskerid contact simulator"
 
 
 @dataclass(frozen=True)
@@ -222,7 +221,7 @@ def iter_contact_runs(
         drive_gain: Factor on the drivetrain's vibration (the body perturbation).
         rtol: Solver relative tolerance.
     """
-    from ._terrain import _check_runs, _run_rng
+    from ._terrain import _CONTACT_SOURCE, _check_runs, _run_rng
 
     record = paper_record() if record is None else record
     _check_runs(specs, duration_s, rate_hz, 1)
@@ -260,7 +259,7 @@ def iter_contact_runs(
                 "terrain": spec.terrain, "speed_mps": f"{spec.speed_mps:g}",
                 "rate_hz": f"{rate_hz:g}", "units": "code", "whisker": record.name,
                 "amplifier": f"{amplifier:g}", "run": str(spec.run), "seed": str(seed),
-                "source": _SOURCE,
+                "source": _CONTACT_SOURCE,
                 "contact": (f"hunt-crossley k={float(c.stiffness):.4g} n={float(c.exponent):g} "
                             f"alpha={float(c.damping):.3g} mu={float(c.friction):.3g} "
                             f"preload_m={float(c.preload):.3g} tilt_rad={float(c.tilt_rad):.3g}"),

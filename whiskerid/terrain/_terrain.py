@@ -98,6 +98,7 @@ from ._sensor import (
 SPEEDS_MPS = (0.10, 0.15, 0.20, 0.25, 0.30)
 MIN_DATASET_DURATION_S = 2.0  # shortest recording synthesize_dataset makes: a window is 1 s
 _SOURCE = "whiskerid terrain simulator"  # metadata that marks the simulator's recordings
+_CONTACT_SOURCE = "whiskerid contact simulator"  # the same, with the tip on the ground
 
 
 @dataclass(frozen=True)
@@ -288,6 +289,8 @@ def synthesize_dataset(
     seed: int = 0,
     replace_synthetic: bool = False,
     channels: int = 1,
+    contact: bool = False,
+    preload_m: float | None = None,
 ) -> list[Path]:
     """Write a labelled dataset ``out/<terrain>/<terrain>_v<speed>_r<run>.csv`` as CSV recordings.
 
@@ -305,6 +308,9 @@ def synthesize_dataset(
             refused.
         channels: Hall sensors: 1 (column ``adc``) or 2 (``hall_a``, ``hall_b``; see
             :func:`synthesize_runs`).
+        contact: The whisker's tip on the ground (:func:`iter_contact_runs`: unilateral
+            contact with friction, one Hall sensor) instead of the base motion alone.
+        preload_m: With ``contact``: the nominal preload (m); the default otherwise.
 
     Each recording is written as soon as its batch of runs is simulated, so memory does
     not grow with the number of runs and an interrupted call leaves whole files.
@@ -318,11 +324,22 @@ def synthesize_dataset(
     """
     if runs < 1:
         raise ValueError("runs must be at least 1")
+    if contact and channels != 1:
+        raise ValueError("the contact simulator has one Hall sensor (the vertical plane): "
+                         "use channels = 1 with contact")  # fmt: skip
     _check_dataset_args(terrains, speeds, duration_s)
     specs = [RunSpec(t, float(v), r) for t in terrains for v in speeds for r in range(runs)]
     paths = dataset_paths(out, specs)
     _check_dataset_folder(Path(out), paths if replace_synthetic else [])
-    recs = iter_runs(specs, record=record, duration_s=duration_s, seed=seed, channels=channels)
+    if contact:
+        from ._contact_runs import DEFAULT_PRELOAD_M, iter_contact_runs
+
+        preload = DEFAULT_PRELOAD_M if preload_m is None else preload_m
+        recs = iter_contact_runs(specs, record=record, duration_s=duration_s, seed=seed,
+                                 preload_m=preload)  # fmt: skip
+    else:
+        recs = iter_runs(specs, record=record, duration_s=duration_s, seed=seed,
+                         channels=channels)  # fmt: skip
     return [write_csv(path, rec) for path, rec in zip(paths, recs, strict=True)]
 
 
@@ -369,6 +386,6 @@ def _is_synthetic(path: Path) -> bool:
         for line in fh:
             if not line.startswith("#"):
                 return False
-            if line.strip() == f"# source: {_SOURCE}":
+            if line.strip() in (f"# source: {_SOURCE}", f"# source: {_CONTACT_SOURCE}"):
                 return True
     return False
