@@ -58,6 +58,20 @@ def test_carrier_alone_and_unrelated_lines_have_no_sidebands():
     assert not _test(x, 30.0)["present"]  # lines 8 and 11 Hz away: no symmetric pair
 
 
+def test_harmonic_and_slow_undulation_are_no_sidebands():
+    """A drivetrain's tone with its second harmonic, on a whisker that follows a slow
+    undulation of the ground: at Δ ≈ f_c, ``2f_c`` and the undulation are symmetric about
+    the carrier to within a bin (0.5 Hz here), a pair the test must not count (without its
+    2 Hz lower limit on the lower side, it does: ``min_hz=0``)."""
+    rng = np.random.default_rng(6)
+    x = _carrier(rng, f_c=21.3) + 0.4 * np.sin(4 * np.pi * 21.3 * T)
+    x = x + 3 * np.sin(2 * np.pi * 0.3 * T)
+    out = [welch_power(x[s : s + 800], 400) for s in range(0, x.size - 799, 800)]
+    powers, dof = np.stack([p for p, _ in out]), welch_dof(out[0][1])
+    assert not sideband_test(powers, 0.5, 21.3, dof)["present"]
+    assert sideband_test(powers, 0.5, 21.3, dof, min_hz=0.0)["present"]
+
+
 def test_free_ringing_at_f1_has_no_sidebands():
     """Around a broad resonance both skirts rise above the floor: they are no peaks."""
     x = _ringing(np.random.default_rng(2))

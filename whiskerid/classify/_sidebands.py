@@ -109,7 +109,7 @@ def _interp_bin(power, b):
 
 
 def sideband_test(powers: np.ndarray, df_hz: float, carrier_hz: float, dof: float, *,
-                  floor_hz: float = 5.0, alpha: float = 0.01,
+                  floor_hz: float = 5.0, alpha: float = 0.01, min_hz: float = 2.0,
                   max_offset_hz: float | None = None) -> dict:  # fmt: skip
     """Test windows' spectra for symmetric sidebands around ``carrier_hz``.
 
@@ -120,6 +120,9 @@ def sideband_test(powers: np.ndarray, df_hz: float, carrier_hz: float, dof: floa
         dof: Degrees of freedom of each bin (:func:`welch_dof`).
         floor_hz: Half-width of the local floor's neighbourhood (Hz), at least 8 bins.
         alpha: Significance level of the verdict.
+        min_hz: Lowest frequency of a lower sideband (Hz). Below it lie a recording's
+            drift and the ground's slow undulation, and with ``Δ ≈ f_c`` the carrier's
+            second harmonic ``2f_c`` would pair with them (a harmonic is no sideband).
         max_offset_hz: Largest ``Δ`` tried (Hz); all that fit by default.
 
     Returns:
@@ -134,7 +137,7 @@ def sideband_test(powers: np.ndarray, df_hz: float, carrier_hz: float, dof: floa
     floor_bins = max(round(floor_hz / df_hz), 8)
     ratios = np.stack([floor_ratio(p, dof, floor_bins) for p in powers])
     c = round(carrier_hz / df_hz)
-    d_max = min(c - 2, n_bins - 2 - c)
+    d_max = min(c - max(int(np.ceil(min_hz / df_hz)), 2), n_bins - 2 - c)
     if max_offset_hz is not None:
         d_max = min(d_max, int(max_offset_hz / df_hz))
     carrier = [_side(r, p, c) for r, p in zip(ratios, powers, strict=True)]
