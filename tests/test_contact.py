@@ -170,3 +170,27 @@ def _covered(t, pieces):
     for p in pieces:
         out |= (t >= p.t[0]) & (t <= p.t[-1])
     return out
+
+
+def test_dataset_synth_contact_refuses_two_sensors(tmp_path, capsys):
+    from whiskerid.cli import main
+
+    args = ["dataset", "synth", "--out", str(tmp_path / "d"), "--contact", "--channels", "2"]
+    assert main(args) == 2
+    assert "--contact simulates one Hall sensor" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_contact_runs_are_the_linear_runs_with_the_tip_down(tmp_path):
+    """Same seed, same run: the contact recording has the linear one's sample times (the
+    same random draws), its own metadata, and a tip that touches the ground."""
+    from whiskerid.terrain import RunSpec, iter_contact_runs, iter_runs
+
+    spec = [RunSpec("brick", 0.2, 0)]
+    (lin,) = iter_runs(spec, duration_s=2.0, seed=3)
+    (con,) = iter_contact_runs(spec, duration_s=2.0, seed=3)
+    np.testing.assert_array_equal(lin.t, con.t)
+    assert con.meta["source"] == "whiskerid contact simulator"
+    assert abs(float(con.meta["perturbation_hz"]) - 48 * 0.2 / (2 * np.pi * 0.035)) < 3
+    assert 0.3 < float(con.meta["contact_fraction"]) <= 1.0
+    assert np.std(con.columns["adc"]) > 3 * np.std(lin.columns["adc"])

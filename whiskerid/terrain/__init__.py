@@ -1,4 +1,5 @@
-"""The terrain simulator: profiles, wheels, drivetrain, and the whisker's response to them."""
+"""The terrain simulator: profiles, wheels, drivetrain, and the whisker's response to them;
+with the contact simulator, the whisker's tip on the ground (unilateral contact, friction)."""
 
 from .. import _jax_setup as _jax_setup
 from ._contact import ContactInputs as ContactInputs
