@@ -75,9 +75,11 @@ _STREAM_NAMES = (
 
 def __getattr__(name: str):
     if name in _STREAM_NAMES:
-        from . import _stream
+        from . import _stream, _stream_loop, _terrain_source
 
-        return getattr(_stream, name)
+        for module in (_stream, _stream_loop, _terrain_source):
+            if hasattr(module, name):
+                return getattr(module, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
@@ -87,11 +89,11 @@ def __dir__() -> list[str]:
 
 if TYPE_CHECKING:
     from ._stream import FAULT_LABELS as FAULT_LABELS
-    from ._stream import BackgroundClassifier as BackgroundClassifier
     from ._stream import OnlineClassifier as OnlineClassifier
     from ._stream import PendingWindow as PendingWindow
-    from ._stream import StreamSummary as StreamSummary
     from ._stream import WindowLabel as WindowLabel
-    from ._stream import open_recorder as open_recorder
-    from ._stream import run_stream as run_stream
-    from ._stream import terrain_source as terrain_source
+    from ._stream_loop import BackgroundClassifier as BackgroundClassifier
+    from ._stream_loop import StreamSummary as StreamSummary
+    from ._stream_loop import open_recorder as open_recorder
+    from ._stream_loop import run_stream as run_stream
+    from ._terrain_source import terrain_source as terrain_source
