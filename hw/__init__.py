@@ -45,6 +45,8 @@ from ._live import LabelSink as LabelSink
 from ._live import SpeedFeed as SpeedFeed
 from ._live import odometry_speed as odometry_speed
 from ._live import parse_endpoint as parse_endpoint
+from ._realtime import PipeWriter as PipeWriter
+from ._realtime import raise_priority as raise_priority
 from ._recorder import CSVRecording as CSVRecording
 from ._recorder import Recorder as Recorder
 from ._recorder import read_recording_csv as read_recording_csv

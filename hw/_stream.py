@@ -28,6 +28,7 @@ import numpy as np
 
 from ..classify import fuse_context
 from ..io._ads1115_spec import CODE_MAX, CODE_MIN
+from ._live import MAX_SPEED_MPS
 
 
 @dataclass(frozen=True)
@@ -43,6 +44,8 @@ class WindowLabel:
             context).
         reason: Why a window got no terrain (``label`` one of :data:`FAULT_LABELS`), else "".
         speed_mps: The robot's speed the window was classified with (None: unknown).
+        speed_note: How that speed was known when it was not a fresh reading ("last known
+            0.3 m/s, 4.2 s old", "none received yet"), else "".
     """
 
     t_end_s: float
@@ -52,6 +55,7 @@ class WindowLabel:
     window_label: str = ""
     reason: str = ""
     speed_mps: float | None = None
+    speed_note: str = ""
 
     @property
     def fault(self) -> bool:
@@ -66,6 +70,11 @@ class WindowLabel:
 SENSOR_FAULT, NO_DATA, MODEL_FAULT, STOPPED = "sensor-fault", "no-data", "model-fault", "stopped"
 FAULT_LABELS = (SENSOR_FAULT, NO_DATA, MODEL_FAULT, STOPPED)
 
+#: A live speed not updated for longer than this (s) is reported as the last known one.
+SPEED_STALE_S = 2.0
+#: Speed the model is compiled with before the robot's is known (m/s; any plausible one).
+WARM_UP_SPEED_MPS = 0.2
+
 
 @dataclass(frozen=True)
 class PendingWindow:
@@ -77,6 +86,7 @@ class PendingWindow:
         arrived_s: Clock reading when its last sample arrived (for the latency).
         fault: ``(label, reason)`` when the window is not fit to classify, else None.
         speed_mps: The robot's speed when the window was cut (None: unknown).
+        speed_note: How that speed was known, when not fresh (see :class:`WindowLabel`).
     """
 
     t_end_s: float
@@ -84,6 +94,7 @@ class PendingWindow:
     arrived_s: float
     fault: tuple[str, str] | None = None
     speed_mps: float | None = None
+    speed_note: str = ""
 
 
 class OnlineClassifier:
@@ -154,11 +165,35 @@ class OnlineClassifier:
         self._next_s: float | None = None
         self._grid = np.arange(model.window) / model.rate_hz
         self._recent: collections.deque = collections.deque()  # (t_end_s, probabilities)
+        self._last_speed: tuple[float, float] | None = None  # (m/s, stream time)
+        #: The window checks, in order (see :meth:`check_window`).
+        self.window_checks: list[Callable] = [self._check, self._no_speed, self._stopped]
 
     def speed_at(self, t_s: float) -> float | None:
         """The robot's speed at stream time ``t_s`` (None when unknown)."""
+        return self.speed_with_note(t_s)[0]
+
+    def speed_with_note(self, t_s: float) -> tuple[float | None, str]:
+        """The speed to label with at stream time ``t_s``, and how it is known.
+
+        A fresh, plausible reading (finite, 0 to :data:`MAX_SPEED_MPS`) is used as it is.
+        Otherwise (no reading yet, a NaN or a gap in the odometry, an implausible value, a
+        live feed silent for over :data:`SPEED_STALE_S`) the last good reading is used and
+        the note says so; before any, the speed is None ("none received yet"). A missing
+        speed never stops the stream.
+        """
         v = self.speed(t_s) if callable(self.speed) else self.speed
-        return None if v is None or not np.isfinite(v) else float(v)
+        age = getattr(self.speed, "age_s", None)
+        age_s = age() if callable(age) else 0.0
+        good = v is not None and np.isfinite(v) and 0 <= v <= MAX_SPEED_MPS
+        if good and (age_s is None or age_s <= SPEED_STALE_S):
+            self._last_speed = (float(v), t_s)
+            return float(v), ""
+        if self._last_speed is None:
+            return None, "none received yet"
+        last, when = self._last_speed
+        old = age_s if good and age_s is not None else t_s - when
+        return last, f"last known {last:g} m/s, {old:.1f} s old"
 
     def warm_up(self, saved_programs: str | Path | None = None) -> None:
         """Compile the model's path once, so that the first window's latency is honest.
@@ -171,7 +206,8 @@ class OnlineClassifier:
         """
         if saved_programs is not None and hasattr(self.model, "use_saved_program"):
             self.model.use_saved_program(saved_programs)
-        self.model.window_proba(np.zeros(self.model.window), self.speed_at(0.0))
+        # Any plausible speed compiles the same program; the robot's may not be known yet.
+        self.model.window_proba(np.zeros(self.model.window), WARM_UP_SPEED_MPS)
 
     def push(self, t_s: float, value: float) -> WindowLabel | None:
         """Add a sample; return a label when a window is due, else None (model run inline)."""
@@ -211,22 +247,41 @@ class OnlineClassifier:
         if t_s < self._next_s:
             return None
         self._next_s += self.hop_s * max(1, np.ceil((t_s - self._next_s) / self.hop_s + 1e-12))
-        speed = self.speed_at(t_s)
+        speed, note = self.speed_with_note(t_s)
         in_window = np.count_nonzero(self._t > t_s - self.window_s)
         if in_window < self.min_fill * self.model.window:
             self.skipped_windows += 1
             reason = (f"bus starved the window: {in_window} of {self.model.window} samples "
                       f"arrived")  # fmt: skip
-            return PendingWindow(t_s, np.empty(0), arrived, (NO_DATA, reason), speed)
+            return PendingWindow(t_s, np.empty(0), arrived, (NO_DATA, reason), speed, note)
         x = self._window(t_s)
-        fault = self._check(x)
-        if fault is None and speed is not None and speed < self.stop_speed_mps:
-            fault = (STOPPED, f"the robot is stopped ({speed:g} m/s)")
-        if fault is None and self.quiet_std is not None and (sd := np.std(x)) < self.quiet_std:
-            fault = (STOPPED, f"quiet: the signal varies by {sd:.3g} RMS (whisker at rest?)")
-        return PendingWindow(t_s, x, arrived, fault, speed)
+        return PendingWindow(t_s, x, arrived, self.check_window(x, speed), speed, note)
 
-    def _check(self, x: np.ndarray) -> tuple[str, str] | None:
+    def check_window(self, x: np.ndarray, speed: float | None) -> tuple[str, str] | None:
+        """Why a window (on the model's grid) gets no terrain, or None.
+
+        The checks of :attr:`window_checks` in order, the first that objects giving the
+        label and reason; more can be appended (each ``check(x, speed)`` returns
+        ``(label, reason)`` or None).
+        """
+        for check in self.window_checks:
+            if (fault := check(x, speed)) is not None:
+                return fault
+        return None
+
+    def _no_speed(self, x: np.ndarray, speed: float | None) -> tuple[str, str] | None:
+        if speed is None and getattr(self.model, "needs_speed", False):
+            return NO_DATA, "no robot speed received yet (this model needs one)"
+        return None
+
+    def _stopped(self, x: np.ndarray, speed: float | None) -> tuple[str, str] | None:
+        if speed is not None and speed < self.stop_speed_mps:
+            return STOPPED, f"the robot is stopped ({speed:g} m/s)"
+        if self.quiet_std is not None and (sd := np.std(x)) < self.quiet_std:
+            return STOPPED, f"quiet: the signal varies by {sd:.3g} RMS (whisker at rest?)"
+        return None
+
+    def _check(self, x: np.ndarray, speed: float | None = None) -> tuple[str, str] | None:
         """Why the window cannot come from a working sensor, or None."""
         lo, hi = self.limits
         if not np.all(np.isfinite(x)):
@@ -262,13 +317,13 @@ class OnlineClassifier:
         latency = self._clock() - pending.arrived_s
         labels = self.model.labels
         return WindowLabel(pending.t_end_s, labels[k], conf, latency, labels[own],
-                           speed_mps=pending.speed_mps)  # fmt: skip
+                           speed_mps=pending.speed_mps, speed_note=pending.speed_note)  # fmt: skip
 
     def _fault(self, pending: PendingWindow, label: str, reason: str) -> WindowLabel:
         self._recent.clear()  # what came before the fault says nothing about what follows
         latency = self._clock() - pending.arrived_s
         return WindowLabel(pending.t_end_s, label, 0.0, latency, label, reason,
-                           pending.speed_mps)  # fmt: skip
+                           pending.speed_mps, pending.speed_note)  # fmt: skip
 
     def _window(self, t_end: float) -> np.ndarray:
         order = np.argsort(self._t)

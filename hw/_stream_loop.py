@@ -2,6 +2,7 @@
 thread, labels and running counts out (:func:`run_stream`)."""
 
 import collections
+import contextlib
 import queue
 import signal
 import sys
@@ -124,7 +125,10 @@ class StreamSummary:
     skipped_windows: int = 0
     dropped_windows: int = 0
     record: str | None = None
+    record_stopped: str | None = None
     stopped_by: str = "duration"
+    signal: int | None = None
+    stale_speed_windows: int = 0
     last: WindowLabel | None = None
     _latency: np.ndarray = field(default_factory=lambda: np.zeros(LATENCY_KEPT), repr=False)
 
@@ -135,6 +139,7 @@ class StreamSummary:
         self.windows += 1
         self.label_counts[w.label] += 1
         self.window_label_counts[w.window_label] += 1
+        self.stale_speed_windows += bool(w.speed_note)
         before = self.last
         self.last = w
         if w.fault:
@@ -174,6 +179,8 @@ class StreamSummary:
             "majority_label": max(terrains, key=terrains.get) if terrains else None,
             "latency_ms": {"p50": _pct(lat, 50), "p99": _pct(lat, 99)},
             "record": self.record,
+            "record_stopped": self.record_stopped,
+            "windows_without_fresh_speed": self.stale_speed_windows,
             "stopped_by": self.stopped_by,
         }
         if truth is not None:
@@ -204,13 +211,22 @@ def run_stream(
     background: bool = True,
     channel: int = 0,
     summary: StreamSummary | None = None,
+    stop: Callable[[], bool] | None = None,
+    on_note: Callable[[str], None] | None = None,
 ) -> StreamSummary:
     """Feed samples (``hw.Sample``: ``t_s``, ``code``, ``volts``) to the classifier.
 
-    The model's channel decides what is fed: ``adc`` codes (default) or volts. SIGTERM is
-    turned into a clean stop, like Ctrl-C. :class:`whiskerid.hw.Gap` items (a sampler's
-    ``samples(gaps=True)``) keep the loop turning while the bus is down: the recorder still
-    syncs on its timer, and windows that fall due get ``no-data`` labels.
+    The model's channel decides what is fed: ``adc`` codes (default) or volts.
+    :class:`whiskerid.hw.Gap` items (a sampler's ``samples(gaps=True)``) keep the loop
+    turning while the bus is down: the recorder still syncs on its timer, and windows that
+    fall due get ``no-data`` labels.
+
+    Ctrl-C (SIGINT) and SIGTERM stop the stream cleanly. Their handlers only raise a flag
+    that the loop reads at every sample (and a :class:`whiskerid.hw.SamplingProcess` every
+    0.2 s while none comes), so a signal is never lost, wherever it lands (an exception
+    raised in a garbage-collection callback, as JAX registers, is printed and dropped by
+    Python), and no window is cut after it. A recording that fails (a full disk) stops
+    recording, not labelling: the stream goes on, says so once, and the summary keeps why.
 
     Args:
         samples: The sample stream (e.g. ``Sampler.samples(duration_s=..., gaps=True)``,
@@ -226,6 +242,10 @@ def run_stream(
             inline, one window at a time (a virtual clock, where nothing waits anyway).
         channel: The input that is classified (``Sample.channel``), when several are read.
         summary: A summary to fill (e.g. to read its counts while the stream runs).
+        stop: The caller's own stop flag (it then owns the signal handlers); by default
+            SIGINT and SIGTERM are handled here while the stream runs.
+        on_note: Called with a sentence when something changes that the user must know
+            (the recording stopped).
 
     Returns:
         The summary: running counts of labels and faults.
@@ -233,11 +253,12 @@ def run_stream(
     summary = StreamSummary() if summary is None else summary
     summary.record = None if recorder is None else str(recorder.path)
     use_volts = getattr(online.model, "channel", None) in ("voltage", "volts")
-    rounds = Rounds(len(recorder.columns)) if recorder is not None and recorder.own_times else None
-    previous = signal.getsignal(signal.SIGTERM)
-
-    def _terminate(signum, frame):
-        raise KeyboardInterrupt
+    own = _StopFlag() if stop is None else None
+    should_stop = own.is_set if own is not None else stop
+    assert should_stop is not None
+    if hasattr(samples, "stop_when"):
+        samples.stop_when(should_stop)
+    rec = None if recorder is None else _GuardedRecorder(recorder, summary, on_note)
 
     def _labelled(label: WindowLabel) -> None:
         summary.add(label)
@@ -245,46 +266,115 @@ def run_stream(
             on_label(label)
 
     worker = BackgroundClassifier(online, _labelled).start() if background else None
-    signal.signal(signal.SIGTERM, _terminate)
     # Samples that waited (in a sampling process's pipe) carry their arrival time.
     waited = samples if hasattr(samples, "arrived_s") else None
-    try:
-        for s in samples:
-            arrived = None if waited is None else waited.arrived_s
-            if isinstance(s, Gap):
-                if recorder is not None:
-                    recorder.maybe_sync()
-                pending = online.gap(s.t_s, arrived) if s.channel == channel else None
-            else:
-                summary.samples += 1
-                summary.duration_s = s.t_s
-                if rounds is not None:
-                    if (row := rounds.push(s)) is not None:
-                        recorder.write_round(*row)
-                elif recorder is not None:
-                    recorder.write(s.t_s, s.code)
-                if s.channel != channel:
-                    continue
-                pending = online.cut(s.t_s, s.volts if use_volts else s.code, arrived)
-            if pending is None:
-                continue
-            if worker is not None:
-                worker.submit(pending)
-            else:
-                _labelled(online.classify(pending))
-    except KeyboardInterrupt:
-        summary.stopped_by = "signal"
-    finally:
-        signal.signal(signal.SIGTERM, previous)
+    with contextlib.nullcontext() if own is None else own.installed():
         try:
-            if worker is not None:
-                worker.close()
-                summary.dropped_windows = worker.dropped
+            for s in samples:
+                if should_stop():
+                    break
+                arrived = None if waited is None else waited.arrived_s
+                if isinstance(s, Gap):
+                    if rec is not None:
+                        rec.maybe_sync(s.t_s)
+                    pending = online.gap(s.t_s, arrived) if s.channel == channel else None
+                else:
+                    summary.samples += 1
+                    summary.duration_s = s.t_s
+                    if rec is not None:
+                        rec.write(s)
+                    if s.channel != channel:
+                        continue
+                    pending = online.cut(s.t_s, s.volts if use_volts else s.code, arrived)
+                if pending is None:
+                    continue
+                if worker is not None:
+                    worker.submit(pending)
+                else:
+                    _labelled(online.classify(pending))
+        except KeyboardInterrupt:  # the caller's handler raised (a second signal)
+            summary.stopped_by = "signal"
         finally:
-            summary.skipped_windows = online.skipped_windows
-            if recorder is not None:
-                recorder.close()
+            if should_stop():
+                summary.stopped_by = "signal"
+                summary.signal = None if own is None else own.signum
+            try:
+                if worker is not None:
+                    worker.close()
+                    summary.dropped_windows = worker.dropped
+            finally:
+                summary.skipped_windows = online.skipped_windows
+                if rec is not None:
+                    rec.close()
     return summary
+
+
+class _StopFlag:
+    """SIGINT and SIGTERM handlers that only note the signal: they never raise, so a signal
+    that arrives inside a callback whose exceptions are ignored is not lost."""
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+
+    def is_set(self) -> bool:
+        return self.signum is not None
+
+    def _handle(self, signum, frame) -> None:
+        self.signum = signum
+
+    @contextlib.contextmanager
+    def installed(self):
+        if threading.current_thread() is not threading.main_thread():
+            yield self  # signals are only delivered to the main thread's handlers
+            return
+        previous = {sig: signal.signal(sig, self._handle) for sig in (signal.SIGINT,
+                                                                      signal.SIGTERM)}  # fmt: skip
+        try:
+            yield self
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+
+
+class _GuardedRecorder:
+    """The stream's recorder, which stops recording on an I/O error (a full disk, a removed
+    card) instead of stopping the stream: labels matter more than the file."""
+
+    def __init__(self, recorder, summary: StreamSummary, on_note) -> None:
+        self.recorder = recorder
+        self.summary = summary
+        self.on_note = on_note
+        self.rounds = Rounds(len(recorder.columns)) if recorder.own_times else None
+
+    def write(self, s) -> None:
+        self._guard(s.t_s, self._write, s)
+
+    def _write(self, s) -> None:
+        if self.rounds is None:
+            self.recorder.write(s.t_s, s.code)
+        elif (row := self.rounds.push(s)) is not None:
+            self.recorder.write_round(*row)
+
+    def maybe_sync(self, t_s: float) -> None:
+        self._guard(t_s, self.recorder.maybe_sync)
+
+    def _guard(self, t_s: float, fn, *args) -> None:
+        if self.summary.record_stopped is not None:
+            return
+        try:
+            fn(*args)
+        except OSError as e:
+            why = e.strerror or str(e)
+            self.summary.record_stopped = (f"recording stopped at t = {t_s:.1f} s: {why}; "
+                                           "labelling goes on")  # fmt: skip
+            self.close()
+            if self.on_note is not None:
+                self.on_note(self.summary.record_stopped)
+
+    def close(self) -> None:
+        # The file that failed may fail again as it is closed: it is closed all the same.
+        with contextlib.suppress(OSError, ValueError):
+            self.recorder.close()
 
 
 def open_recorder(path: Path | None, *, rate_hz: float, meta: dict):
