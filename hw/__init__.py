@@ -41,8 +41,10 @@ from ._inputs import data_rate_for as data_rate_for
 from ._inputs import emulated_bus as emulated_bus
 from ._inputs import max_scan_rate_hz as max_scan_rate_hz
 from ._inputs import parse_inputs as parse_inputs
+from ._live import MAX_SPEED_MPS as MAX_SPEED_MPS
 from ._live import LabelSink as LabelSink
 from ._live import SpeedFeed as SpeedFeed
+from ._live import check_speed_mps as check_speed_mps
 from ._live import odometry_speed as odometry_speed
 from ._live import parse_endpoint as parse_endpoint
 from ._realtime import PipeWriter as PipeWriter
@@ -71,6 +73,7 @@ _STREAM_NAMES = (
     "WindowLabel",
     "open_recorder",
     "run_stream",
+    "terrain_signal",
     "terrain_source",
 )
 
@@ -98,4 +101,5 @@ if TYPE_CHECKING:
     from ._stream_loop import StreamSummary as StreamSummary
     from ._stream_loop import open_recorder as open_recorder
     from ._stream_loop import run_stream as run_stream
+    from ._terrain_source import terrain_signal as terrain_signal
     from ._terrain_source import terrain_source as terrain_source

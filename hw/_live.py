@@ -146,31 +146,23 @@ class SpeedFeed:
 def odometry_speed(path) -> Any:
     """``speed(t_s)`` interpolated from an odometry CSV with columns ``t`` and ``speed_mps``.
 
-    Rows whose speed is not finite or not plausible (beyond :data:`MAX_SPEED_MPS`) are left
-    out, and so is the time around a gap in the log (a step over a second): there the speed
-    is NaN, and the stream labels with the last known one and says so.
+    Where the log says nothing (before its first row, after its last, next to a NaN or an
+    implausible value beyond :data:`MAX_SPEED_MPS`) the speed is NaN: the stream then
+    labels with the last known speed and says so.
 
     Raises:
         whiskerid.io.RecordingError: Not readable, or no ``speed_mps`` column.
     """
     rec = read_recording(path)
     t, v = rec.t, np.asarray(rec.signal("speed_mps"), dtype=float)
-    ok = np.isfinite(v) & (v >= 0) & (v <= MAX_SPEED_MPS)
-    t, v = t[ok], v[ok]
+    v = np.where((v >= 0) & (v <= MAX_SPEED_MPS), v, np.nan)  # NaN stays NaN
 
     def speed(t_s: float) -> float:
-        if t.size == 0:
-            return float("nan")
-        i = int(np.searchsorted(t, t_s))
-        if 0 < i < t.size and t[i] - t[i - 1] > ODOMETRY_GAP_S:
+        if not t[0] <= t_s <= t[-1]:
             return float("nan")
         return float(np.interp(t_s, t, v))
 
     return speed
-
-
-#: A step this long (s) between odometry rows is a gap: no speed is read across it.
-ODOMETRY_GAP_S = 1.0
 
 
 class LabelSink:

@@ -37,11 +37,21 @@ _FADE_S = 1.0
 
 
 def _terrain_chunk(record, terrain, speed_mps, duration_s, seed, amplifier):
+    return source_from_recording(*terrain_signal(record, terrain, speed_mps, duration_s,
+                                                 seed=seed, amplifier=amplifier))  # fmt: skip
+
+
+def terrain_signal(
+    record, terrain: str, speed_mps: float, duration_s: float, *, seed=0,
+    amplifier: float = AMPLIFIER,
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Times (s) and Hall-sensor voltages (V) of :func:`terrain_source` with a duration, as
+    arrays (to hand to a sampling process as a recording)."""
     rng = np.random.default_rng([*np.atleast_1d(seed), 7919])
     t, acc = base_acceleration(terrain, speed_mps, duration_s + 1.0, rng)
     volts = np.asarray(hall_voltage(record.whisker(), amplified_hall(record, amplifier), t, acc))
     keep = t >= 0
-    return source_from_recording(t[keep], volts[keep])
+    return t[keep], volts[keep]
 
 
 class _EndlessTerrain:
