@@ -182,6 +182,8 @@ class OnlineClassifier:
         the note says so; before any, the speed is None ("none received yet"). A missing
         speed never stops the stream.
         """
+        if self.speed is None:  # no speed given: nothing to note
+            return None, ""
         v = self.speed(t_s) if callable(self.speed) else self.speed
         age = getattr(self.speed, "age_s", None)
         age_s = age() if callable(age) else 0.0
