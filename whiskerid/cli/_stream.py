@@ -121,6 +121,14 @@ def add_parser(sub) -> None:
         f"program: a restart reuses both instead of tracing and compiling again "
         f"(default ${CACHE_ENV}, else ~/.cache/whiskerid/jax; 'none' turns it off)",
     )
+    p.add_argument(
+        "--priority",
+        choices=("auto", "realtime", "nice", "none"),
+        default="auto",
+        help="priority of the sampling process, so that it keeps its schedule on a busy "
+        "machine: auto tries real time (SCHED_FIFO, where permitted: root, or LimitRTPRIO in "
+        "a systemd unit), then a raised nice value; the one granted is in the summary",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the simulated terrain")
     p.add_argument("--quiet", action="store_true", help="no line per window on stderr")
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
@@ -185,7 +193,7 @@ def _stream_from(hw, args, policy, inputs, cfg, speed, replayed, model, cache, l
     spec = hw.SamplerSpec(inputs=args.inputs, address=args.address, rate_hz=args.rate,
                           duration_s=args.duration, i2c_bus=args.i2c_bus,
                           replay=None if args.replay is None else str(args.replay),
-                          seed=args.seed)  # fmt: skip
+                          seed=args.seed, priority=args.priority)  # fmt: skip
     child = not args.fast and (args.simulate is None or _up_front(args))
     sources = None
     if child and args.simulate is not None:
