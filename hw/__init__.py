@@ -49,6 +49,7 @@ from ._live import odometry_speed as odometry_speed
 from ._live import parse_endpoint as parse_endpoint
 from ._realtime import PipeWriter as PipeWriter
 from ._realtime import raise_priority as raise_priority
+from ._realtime import raised_priority as raised_priority
 from ._recorder import CSVRecording as CSVRecording
 from ._recorder import Recorder as Recorder
 from ._recorder import read_recording_csv as read_recording_csv

@@ -20,10 +20,12 @@ Two things let a sampler keep a 5 ms schedule while other processes use every co
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import os
 import select
 import time
+from collections.abc import Iterator
 
 #: ``fcntl`` command that sets a pipe's capacity (Linux; ``F_SETPIPE_SZ``).
 _F_SETPIPE_SZ = getattr(fcntl, "F_SETPIPE_SZ", 1031)
@@ -67,6 +69,26 @@ def raise_priority(policy: str = "auto", *, rt_priority: int = RT_PRIORITY,
         except (OSError, AttributeError) as e:
             refused.append(f"nice {nice}: {getattr(e, 'strerror', None) or e}")
     return f"normal ({'; '.join(refused)})"
+
+
+@contextlib.contextmanager
+def raised_priority(policy: str = "auto", **kw) -> Iterator[str]:
+    """:func:`raise_priority` for the time of a ``with`` block; the calling thread's policy
+    and nice value are put back after it (a command run from Python leaves its caller as it
+    found it)."""
+    try:
+        before = (os.sched_getscheduler(0), os.sched_getparam(0),
+                  os.getpriority(os.PRIO_PROCESS, 0))  # fmt: skip
+    except (OSError, AttributeError):  # not Linux: nothing to put back
+        before = None
+    try:
+        yield raise_priority(policy, **kw)
+    finally:
+        if before is not None:
+            with contextlib.suppress(OSError):
+                os.sched_setscheduler(0, before[0], before[1])
+            with contextlib.suppress(OSError):
+                os.setpriority(os.PRIO_PROCESS, 0, before[2])
 
 
 class PipeWriter:

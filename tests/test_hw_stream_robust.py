@@ -175,6 +175,7 @@ def test_record_exits_130_or_143_on_a_signal_with_its_file_whole(tmp_path, sine_
 
     summary = json.loads(stdout)
     assert summary["stopped_by"] == "signal" and summary["rows"] > 100
+    assert summary["priority"].startswith(("SCHED_FIFO", "nice", "normal ("))
     rec = hw.read_recording_csv(out)  # whole: no torn row, no warning
     assert rec.t.size == summary["rows"]
 
@@ -315,5 +316,14 @@ def test_raise_priority_says_what_it_got():
                            "print(hw.raise_priority('none'))"],
                           capture_output=True, text=True, timeout=60)  # fmt: skip
     assert done.stdout.splitlines() == ["nice 5", "normal (asked for none)"], done.stderr
+    script = ("import os; from whiskerid import hw\n"
+              "with hw.raised_priority('realtime') as got:\n"
+              "    print(got, os.sched_getscheduler(0) == os.SCHED_FIFO)\n"
+              "print(os.sched_getscheduler(0) == os.SCHED_OTHER)")  # fmt: skip
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=60)  # fmt: skip
+    lines = done.stdout.splitlines()
+    assert lines[-1] == "True", done.stderr  # put back, whatever was granted
+    assert lines[0] in ("SCHED_FIFO 20 True",) or lines[0].startswith("normal (")
     with pytest.raises(ValueError, match="use auto, realtime, nice or none"):
         hw.raise_priority("fastest")

@@ -1,5 +1,6 @@
 """``whiskerid record``: sample ADS1115 inputs to a recording CSV, no model needed."""
 
+import contextlib
 import json
 import math
 import sys
@@ -79,6 +80,14 @@ def add_parser(sub) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the emulated signal and noise")
     p.add_argument(
         "--fast", action="store_true", help="with --emulate: a virtual clock, as fast as possible"
+    )
+    p.add_argument(
+        "--priority",
+        choices=("auto", "realtime", "nice", "none"),
+        default="auto",
+        help="priority of the sampling, so that it keeps its schedule on a busy machine: "
+        "auto tries real time (SCHED_FIFO, where permitted), then a raised nice value; the "
+        "one granted is in the summary (ignored with --fast)",
     )
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.set_defaults(func=run)
@@ -272,20 +281,26 @@ def _record(hw, bus, inputs, config, mode, args, timing, policy) -> dict:
     rounds = hw.Rounds(n)
     value = (lambda c: to_volts(c)) if args.units == "V" else (lambda c: c)
     stopped_by = "duration"
+    # Raised while sampling, after any simulation (only this thread, not JAX's), and put
+    # back after it.
+    raised = contextlib.nullcontext("virtual clock") if args.fast else hw.raised_priority(
+        args.priority)  # fmt: skip
     rec = hw.Recorder(args.out, columns=names, rate_hz=args.rate, units=args.units,
                       own_times=n > 1, metadata=meta, **({"clock": timing["clock"]} if timing
                                                         else {}))  # fmt: skip
+    priority = None
     try:
-        for s in sampler.samples(duration_s=args.duration, gaps=True):
-            if policy.stop_requested():
-                stopped_by = "signal"
-                break
-            if isinstance(s, hw.Gap):
-                rec.maybe_sync()  # keep what came before durable while the bus is down
-            elif n == 1:
-                rec.write(s.t_s, value(s.code))
-            elif (row := rounds.push(s)) is not None:
-                rec.write_round(row[0], [value(c) for c in row[1]])
+        with raised as priority:
+            for s in sampler.samples(duration_s=args.duration, gaps=True):
+                if policy.stop_requested():
+                    stopped_by = "signal"
+                    break
+                if isinstance(s, hw.Gap):
+                    rec.maybe_sync()  # keep what came before durable while the bus is down
+                elif n == 1:
+                    rec.write(s.t_s, value(s.code))
+                elif (row := rounds.push(s)) is not None:
+                    rec.write_round(row[0], [value(c) for c in row[1]])
     except KeyboardInterrupt:  # a second signal
         stopped_by = "signal"
     finally:
@@ -304,6 +319,7 @@ def _record(hw, bus, inputs, config, mode, args, timing, policy) -> dict:
         "overruns": st.overruns,
         "incomplete_rounds": rounds.incomplete,
         "last_error": st.last_error,
+        "priority": priority,
         "stopped_by": stopped_by,
     }
     print(f"record: {rec.rows} rows of {', '.join(names)} at {args.rate:g} Hz "
