@@ -57,8 +57,8 @@ def make_model(folder: Path) -> Path:
     """A small model (brick and sand at 0.2 m/s), as the tests train."""
     ds, model = folder / "ds", folder / "model"
     whiskerid("dataset", "synth", "--out", str(ds), "--terrains", "brick", "sand", "--speeds",
-              "0.2", "--runs", "2", "--duration", "15", "--seed", "3", "--quiet")  # fmt: skip
-    whiskerid("train", str(ds), "--out", str(model), "--seed", "0", "--quiet")
+              "0.2", "--runs", "2", "--duration", "15", "--seed", "3")  # fmt: skip
+    whiskerid("train", str(ds), "--out", str(model), "--seed", "0")
     return model
 
 
