@@ -188,14 +188,15 @@ class OnlineClassifier:
         age = getattr(self.speed, "age_s", None)
         age_s = age() if callable(age) else 0.0
         good = v is not None and np.isfinite(v) and 0 <= v <= MAX_SPEED_MPS
-        if good and (age_s is None or age_s <= SPEED_STALE_S):
-            self._last_speed = (float(v), t_s)
-            return float(v), ""
+        if good:
+            if age_s is None or age_s <= SPEED_STALE_S:
+                self._last_speed = (float(v), t_s)
+                return float(v), ""
+            return float(v), f"last known {v:g} m/s, {age_s:.1f} s old"  # a silent feed
         if self._last_speed is None:
             return None, "none received yet"
         last, when = self._last_speed
-        old = age_s if good and age_s is not None else t_s - when
-        return last, f"last known {last:g} m/s, {old:.1f} s old"
+        return last, f"last known {last:g} m/s, {t_s - when:.1f} s old"
 
     def warm_up(self, saved_programs: str | Path | None = None) -> None:
         """Compile the model's path once, so that the first window's latency is honest.

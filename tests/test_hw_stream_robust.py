@@ -242,7 +242,6 @@ def test_no_speed_yet_a_nan_and_a_silent_feed_never_stop_the_stream():
             return 10.0
 
     online = hw.OnlineClassifier(SpeedModel(), speed_mps=Silent())
-    online._last_speed = (0.2, 0.0)
     assert online.speed_with_note(5.0) == (0.2, "last known 0.2 m/s, 10.0 s old")
 
 
