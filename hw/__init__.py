@@ -41,10 +41,15 @@ from ._inputs import data_rate_for as data_rate_for
 from ._inputs import emulated_bus as emulated_bus
 from ._inputs import max_scan_rate_hz as max_scan_rate_hz
 from ._inputs import parse_inputs as parse_inputs
+from ._live import MAX_SPEED_MPS as MAX_SPEED_MPS
 from ._live import LabelSink as LabelSink
 from ._live import SpeedFeed as SpeedFeed
+from ._live import check_speed_mps as check_speed_mps
 from ._live import odometry_speed as odometry_speed
 from ._live import parse_endpoint as parse_endpoint
+from ._realtime import PipeWriter as PipeWriter
+from ._realtime import raise_priority as raise_priority
+from ._realtime import raised_priority as raised_priority
 from ._recorder import CSVRecording as CSVRecording
 from ._recorder import Recorder as Recorder
 from ._recorder import read_recording_csv as read_recording_csv
@@ -69,15 +74,18 @@ _STREAM_NAMES = (
     "WindowLabel",
     "open_recorder",
     "run_stream",
+    "terrain_signal",
     "terrain_source",
 )
 
 
 def __getattr__(name: str):
     if name in _STREAM_NAMES:
-        from . import _stream
+        from . import _stream, _stream_loop, _terrain_source
 
-        return getattr(_stream, name)
+        for module in (_stream, _stream_loop, _terrain_source):
+            if hasattr(module, name):
+                return getattr(module, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
@@ -87,11 +95,12 @@ def __dir__() -> list[str]:
 
 if TYPE_CHECKING:
     from ._stream import FAULT_LABELS as FAULT_LABELS
-    from ._stream import BackgroundClassifier as BackgroundClassifier
     from ._stream import OnlineClassifier as OnlineClassifier
     from ._stream import PendingWindow as PendingWindow
-    from ._stream import StreamSummary as StreamSummary
     from ._stream import WindowLabel as WindowLabel
-    from ._stream import open_recorder as open_recorder
-    from ._stream import run_stream as run_stream
-    from ._stream import terrain_source as terrain_source
+    from ._stream_loop import BackgroundClassifier as BackgroundClassifier
+    from ._stream_loop import StreamSummary as StreamSummary
+    from ._stream_loop import open_recorder as open_recorder
+    from ._stream_loop import run_stream as run_stream
+    from ._terrain_source import terrain_signal as terrain_signal
+    from ._terrain_source import terrain_source as terrain_source

@@ -117,8 +117,10 @@ def source_from_recording(
     """
     if v is None:
         t, v = _volts_of(t, column)
-    t_arr = np.asarray(t, dtype=np.float64)
-    v_arr = np.asarray(v, dtype=np.float64)
+    # Contiguous copies, once: np.interp copies a strided array (a column of a table read
+    # from CSV) on every call, which made each conversion cost the whole recording.
+    t_arr = np.ascontiguousarray(t, dtype=np.float64)
+    v_arr = np.ascontiguousarray(v, dtype=np.float64)
     if t_arr.ndim != 1 or t_arr.shape != v_arr.shape or t_arr.size < 2:
         raise ValueError("t and v must be 1-D arrays of the same length (at least 2 samples)")
     if not np.all(np.diff(t_arr) > 0):

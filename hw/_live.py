@@ -15,6 +15,7 @@ import math
 import socket
 import sys
 import threading
+import time
 from typing import Any, TextIO
 
 import numpy as np
@@ -22,6 +23,26 @@ import numpy as np
 from whiskerid.io import read_recording
 
 LOCALHOST = "127.0.0.1"
+
+#: Fastest plausible robot speed (m/s): a wheeled or legged ground robot carrying a whisker
+#: moves at up to a few metres per second (the paper's runs: 0.1 to 0.3 m/s). A larger value
+#: is a unit error (mm/s, km/h) or a corrupt message, and is never used to label a window.
+MAX_SPEED_MPS = 5.0
+
+
+def check_speed_mps(value: float, what: str) -> float:
+    """``value`` if it is a plausible robot speed (finite, 0 to :data:`MAX_SPEED_MPS` m/s).
+
+    Raises:
+        ValueError: Otherwise, naming ``what`` (a flag or a file) and what to do.
+    """
+    v = float(value)
+    if not (math.isfinite(v) and 0 <= v <= MAX_SPEED_MPS):
+        raise ValueError(
+            f"{what}: speed {value!r} m/s is not a plausible robot speed (0 to "
+            f"{MAX_SPEED_MPS:g} m/s); give it in metres per second"
+        )
+    return v
 
 
 def parse_endpoint(text: str, flag: str) -> str | int:
@@ -48,7 +69,7 @@ def speed_of(message: str) -> float | None:
         value = value.get("speed_mps", value.get("speed"))
     if isinstance(value, bool) or not isinstance(value, int | float):
         return None
-    return float(value) if math.isfinite(value) and value >= 0 else None
+    return float(value) if math.isfinite(value) and 0 <= value <= MAX_SPEED_MPS else None
 
 
 class SpeedFeed:
@@ -65,6 +86,7 @@ class SpeedFeed:
 
     def __init__(self, where: str | int, *, stream: TextIO | None = None) -> None:
         self.latest: float | None = None
+        self.updated_at: float | None = None  # time.monotonic() of the latest good message
         self.messages = 0
         self.bad_messages = 0
         self._sock: socket.socket | None = None
@@ -89,6 +111,7 @@ class SpeedFeed:
             self.bad_messages += 1
         else:
             self.latest = v
+            self.updated_at = time.monotonic()
             self.messages += 1
 
     def _read_lines(self, lines: TextIO) -> None:
@@ -110,6 +133,10 @@ class SpeedFeed:
     def __call__(self, t_s: float) -> float | None:
         return self.latest
 
+    def age_s(self) -> float | None:
+        """Seconds since the latest good message (None: none yet)."""
+        return None if self.updated_at is None else time.monotonic() - self.updated_at
+
     def close(self) -> None:
         """Stop listening (the stdin reader ends with its stream)."""
         if self._sock is not None:
@@ -119,12 +146,23 @@ class SpeedFeed:
 def odometry_speed(path) -> Any:
     """``speed(t_s)`` interpolated from an odometry CSV with columns ``t`` and ``speed_mps``.
 
+    Where the log says nothing (before its first row, after its last, next to a NaN or an
+    implausible value beyond :data:`MAX_SPEED_MPS`) the speed is NaN: the stream then
+    labels with the last known speed and says so.
+
     Raises:
         whiskerid.io.RecordingError: Not readable, or no ``speed_mps`` column.
     """
     rec = read_recording(path)
     t, v = rec.t, np.asarray(rec.signal("speed_mps"), dtype=float)
-    return lambda t_s: float(np.interp(t_s, t, v))
+    v = np.where((v >= 0) & (v <= MAX_SPEED_MPS), v, np.nan)  # NaN stays NaN
+
+    def speed(t_s: float) -> float:
+        if not t[0] <= t_s <= t[-1]:
+            return float("nan")
+        return float(np.interp(t_s, t, v))
+
+    return speed
 
 
 class LabelSink:
@@ -150,6 +188,8 @@ class LabelSink:
             "speed_mps": w.speed_mps,
             "reason": w.reason,
         }
+        if w.speed_note:
+            msg["speed_note"] = w.speed_note
         line = json.dumps(msg, allow_nan=False)
         if self._sock is not None:
             try:

@@ -175,14 +175,15 @@ class Recorder:
         self._last_sync_ns = self._clock()
 
     def close(self) -> None:
-        """Sync and close the file (idempotent)."""
+        """Sync and close the file (idempotent; closed even when syncing or closing fails,
+        as on a full disk, so that a later call never meets a half-closed file)."""
         if self._file is None:
             return
         try:
             self.sync()
         finally:
-            self._file.close()
-            self._file = None
+            file, self._file = self._file, None
+            file.close()
 
     @property
     def closed(self) -> bool:

@@ -8,4 +8,4 @@ import sys
 from ._sampling_process import SamplerSpec, serve
 
 if __name__ == "__main__":
-    sys.exit(serve(SamplerSpec(**json.loads(sys.argv[1])), sys.stdout))
+    sys.exit(serve(SamplerSpec(**json.loads(sys.argv[1])), sys.stdout.fileno()))

@@ -4,24 +4,30 @@ A stream's own process imports JAX, loads the model and runs it. Parts of that h
 interpreter's lock (the GIL) for many milliseconds at a time (loading a compiled library,
 deserialising a program, a model call), and a sampling thread of the same process misses its
 slots meanwhile: the first window after a start would come out short of samples. The child
-imports only the driver side (numpy, and smbus2 on a Pi), opens the bus, samples on its own
-schedule (on its own core, on a multi-core board) and writes each sample to its standard
-output as one JSON line; the parent reads them in order. The child starts before the parent
-imports JAX, so the first window fills while the model loads.
+imports only the driver side (numpy, and smbus2 on a Pi), opens the bus, raises its own
+priority (real time where permitted, else nice: :func:`whiskerid.hw.raise_priority`), samples
+on its own schedule and writes each sample to its standard output as one JSON line, without
+ever waiting for the parent (:class:`whiskerid.hw.PipeWriter`: a non-blocking pipe that holds
+over a minute of samples); the parent reads them in order. The child starts before the parent
+imports JAX, so the first window fills while the model loads; other processes busy on every
+core delay the samples' arrival, not their reading.
 
 Protocol, one JSON value per line on the child's standard output:
 
+* ``{"priority": "SCHED_FIFO 20"}``: the priority the child got; the first line;
 * ``[t_s, code, volts, channel, round, sent_ns]``: a :class:`~whiskerid.hw.Sample`, and
   when it was sent (``time.monotonic_ns()``, the system's monotonic clock, shared by the two
   processes), from which the parent counts latencies;
 * ``{"gap": [t_s, channel, error, sent_ns]}``: a :class:`~whiskerid.hw.Gap`;
-* ``{"end": {...}}``: the sampler's :class:`~whiskerid.hw.SamplerStats`; the last line;
+* ``{"end": {...}, "handoff": {...}}``: the sampler's :class:`~whiskerid.hw.SamplerStats`,
+  and the hand-off's (lines dropped, largest backlog, pipe size); the last line;
 * ``{"error": "..."}``: the child could not start (bus or recording not opened).
 
 The child stops when its standard input gives a line or ends: the parent's :meth:`close`, or
 the parent's death (even by ``kill -9``), so a sampling child is never left behind. It ignores
-Ctrl-C (the terminal sends it to both processes; the parent decides) and takes SIGTERM as a
-request to stop.
+Ctrl-C and SIGTERM: the terminal, and systemd stopping a service, send them to the whole
+process group, and the parent decides when the samples end (a child that stopped first would
+leave the parent's last windows without samples).
 """
 
 from __future__ import annotations
@@ -39,6 +45,7 @@ from collections.abc import Callable, Iterator
 from ._ads1115 import DEFAULT_CONFIG, Config, open_bus
 from ._emulator import replay_sources
 from ._inputs import Input, converter, data_rate_for, emulated_bus, parse_inputs
+from ._realtime import PipeWriter, raise_priority
 from ._sampler import Gap, Sample, Sampler, SamplerStats
 
 
@@ -58,6 +65,9 @@ class SamplerSpec:
         i2c_bus: Read a real chip on ``/dev/i2c-<i2c_bus>``.
         replay: Else replay this recording through the emulated chip.
         seed: Seed of the emulated chip's noise.
+        priority: The sampling process's priority: ``auto`` (real time where permitted,
+            else nice), ``realtime``, ``nice`` or ``none`` (see
+            :func:`whiskerid.hw.raise_priority`).
     """
 
     inputs: str = "A0"
@@ -67,6 +77,7 @@ class SamplerSpec:
     i2c_bus: int | None = None
     replay: str | None = None
     seed: int = 0
+    priority: str = "auto"
 
     def to_json(self) -> str:
         """The spec as one line of JSON."""
@@ -123,7 +134,10 @@ class SamplingProcess:
     Iterating yields :class:`~whiskerid.hw.Sample` and :class:`~whiskerid.hw.Gap` items
     until the spec's duration ends or :meth:`close` is called; :attr:`arrived_s` is the
     latest item's arrival on ``clock`` (so that a window's latency counts the time its last
-    sample waited in the pipe), and :attr:`stats` the child's counters once it has ended.
+    sample waited in the pipe), :attr:`stats` the child's counters once it has ended,
+    :attr:`priority` the priority it got and :attr:`handoff` the hand-off's counters.
+    Iteration also ends, within 0.2 s, when the callable given to :meth:`stop_when` says so
+    (a signal's flag), whether or not samples arrive.
 
     Args:
         spec: What the child samples.
@@ -144,8 +158,11 @@ class SamplingProcess:
         self.spec = spec
         self.stats = SamplerStats()
         self.arrived_s: float | None = None
+        self.priority: str | None = None
+        self.handoff: dict = {}
         self._clock = clock
         self._ended = False
+        self._stop: Callable[[], bool] = lambda: False
         self._proc = subprocess.Popen(
             [python, "-m", "whiskerid.hw._sampling_child", spec.to_json()],
             stdin=subprocess.PIPE,
@@ -161,10 +178,17 @@ class SamplingProcess:
                                         daemon=True)  # fmt: skip
         self._reader.start()
 
+    def stop_when(self, stop: Callable[[], bool]) -> None:
+        """End the iteration as soon as ``stop()`` is true (polled at least every 0.2 s)."""
+        self._stop = stop
+
     def _read(self) -> None:
         assert self._proc.stdout is not None
         for line in self._proc.stdout:
             msg = json.loads(line)
+            if isinstance(msg, dict) and "priority" in msg:
+                self.priority = msg["priority"]
+                continue
             sent = msg[-1] if isinstance(msg, list) else msg.get("gap", [0])[-1]
             self._queue.put((msg, self._arrival(sent) if sent else None))
             if isinstance(msg, dict) and ("end" in msg or "error" in msg):
@@ -172,7 +196,7 @@ class SamplingProcess:
         self._queue.put((None, None))  # the pipe closed without the closing line
 
     def __iter__(self) -> Iterator[Sample | Gap]:
-        while not self._ended:
+        while not self._ended and not self._stop():
             try:
                 # A timeout keeps the wait interruptible by Ctrl-C and SIGTERM everywhere.
                 msg, arrived = self._queue.get(timeout=0.2)
@@ -195,6 +219,7 @@ class SamplingProcess:
             return Gap(t_s, channel, error)
         if "end" in msg:
             self.stats = SamplerStats(**msg["end"])
+            self.handoff = msg.get("handoff", {})
             self._ended = True
             return None
         self._ended = True  # nothing follows the error: close() need not wait for its end
@@ -239,34 +264,41 @@ class SamplingProcess:
             proc.stdout.close()
 
 
-def serve(spec: SamplerSpec, out) -> int:
-    """The child: sample and write JSON lines until the duration ends or stdin says stop."""
+def serve(spec: SamplerSpec, fd: int) -> int:
+    """The child: sample and write JSON lines to ``fd`` until the duration ends or stdin
+    says stop."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    out = PipeWriter(fd)
+
+    def send(msg) -> None:
+        out.write((json.dumps(msg) + "\n").encode())
+
     try:
         sampler, bus, _, _ = open_sampler(spec)
     except Exception as e:  # reported to the parent, which says it in its own words
-        out.write(json.dumps({"error": f"{type(e).__name__}: {e}"}) + "\n")
-        out.flush()
+        send({"error": f"{type(e).__name__}: {e}"})
+        out.drain()
         return 1
-    signal.signal(signal.SIGTERM, lambda signum, frame: sampler.stop())
-
-    def watch_stdin() -> None:
-        sys.stdin.readline()  # a line, or its end: the parent has gone
-        sampler.stop()
-
-    threading.Thread(target=watch_stdin, daemon=True).start()
     try:
+        send({"priority": raise_priority(spec.priority)})
+
+        def watch_stdin() -> None:
+            sys.stdin.readline()  # a line, or its end: the parent has gone
+            sampler.stop()
+
+        threading.Thread(target=watch_stdin, daemon=True).start()
         for item in sampler.samples(duration_s=spec.duration_s, gaps=True):
             sent = time.monotonic_ns()
             if isinstance(item, Gap):
-                line = json.dumps({"gap": [item.t_s, item.channel, item.error, sent]})
+                send({"gap": [item.t_s, item.channel, item.error, sent]})
             else:
-                line = json.dumps([item.t_s, int(item.code), float(item.volts), item.channel,
-                                   item.round, sent])  # fmt: skip
-            out.write(line + "\n")
-            out.flush()
-        out.write(json.dumps({"end": dataclasses.asdict(sampler.stats)}) + "\n")
-        out.flush()
+                send([item.t_s, int(item.code), float(item.volts), item.channel, item.round,
+                      sent])  # fmt: skip
+        handoff = {"dropped": out.dropped, "backlog_peak_bytes": out.backlog_peak,
+                   "pipe_bytes": out.pipe_bytes}  # fmt: skip
+        send({"end": dataclasses.asdict(sampler.stats), "handoff": handoff})
+        out.drain()
     except BrokenPipeError:  # the parent has gone: nothing to report to
         return 0
     finally:

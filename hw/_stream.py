@@ -12,27 +12,23 @@ In real time the model runs on a worker thread (:class:`BackgroundClassifier`): 
 loop only cuts the window (an interpolation of a few hundred samples) and goes back to its
 schedule, so a slow model (a Pi is several times slower than a desktop) costs label latency,
 not samples.
+
+This module holds the windowing and the checks (:class:`OnlineClassifier`); the loop, its
+worker thread and its summary are in :mod:`whiskerid.hw._stream_loop`, the simulated terrain
+in :mod:`whiskerid.hw._terrain_source`.
 """
 
 import collections
-import queue
-import signal
-import sys
-import threading
 import time
-from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..classify import fuse_context
 from ..io._ads1115_spec import CODE_MAX, CODE_MIN
-from ..terrain import AMPLIFIER, amplified_hall, base_acceleration, hall_voltage
-from ._emulator import source_from_recording
-from ._inputs import Rounds
-from ._recorder import Recorder, unique_path
-from ._sampler import Gap
+from ._live import MAX_SPEED_MPS
 
 
 @dataclass(frozen=True)
@@ -48,6 +44,8 @@ class WindowLabel:
             context).
         reason: Why a window got no terrain (``label`` one of :data:`FAULT_LABELS`), else "".
         speed_mps: The robot's speed the window was classified with (None: unknown).
+        speed_note: How that speed was known when it was not a fresh reading ("last known
+            0.3 m/s, 4.2 s old", "none received yet"), else "".
     """
 
     t_end_s: float
@@ -57,6 +55,7 @@ class WindowLabel:
     window_label: str = ""
     reason: str = ""
     speed_mps: float | None = None
+    speed_note: str = ""
 
     @property
     def fault(self) -> bool:
@@ -71,6 +70,11 @@ class WindowLabel:
 SENSOR_FAULT, NO_DATA, MODEL_FAULT, STOPPED = "sensor-fault", "no-data", "model-fault", "stopped"
 FAULT_LABELS = (SENSOR_FAULT, NO_DATA, MODEL_FAULT, STOPPED)
 
+#: A live speed not updated for longer than this (s) is reported as the last known one.
+SPEED_STALE_S = 2.0
+#: Speed the model is compiled with before the robot's is known (m/s; any plausible one).
+WARM_UP_SPEED_MPS = 0.2
+
 
 @dataclass(frozen=True)
 class PendingWindow:
@@ -82,6 +86,7 @@ class PendingWindow:
         arrived_s: Clock reading when its last sample arrived (for the latency).
         fault: ``(label, reason)`` when the window is not fit to classify, else None.
         speed_mps: The robot's speed when the window was cut (None: unknown).
+        speed_note: How that speed was known, when not fresh (see :class:`WindowLabel`).
     """
 
     t_end_s: float
@@ -89,6 +94,7 @@ class PendingWindow:
     arrived_s: float
     fault: tuple[str, str] | None = None
     speed_mps: float | None = None
+    speed_note: str = ""
 
 
 class OnlineClassifier:
@@ -159,11 +165,38 @@ class OnlineClassifier:
         self._next_s: float | None = None
         self._grid = np.arange(model.window) / model.rate_hz
         self._recent: collections.deque = collections.deque()  # (t_end_s, probabilities)
+        self._last_speed: tuple[float, float] | None = None  # (m/s, stream time)
+        #: The window checks, in order (see :meth:`check_window`).
+        self.window_checks: list[Callable] = [self._check, self._no_speed, self._stopped]
 
     def speed_at(self, t_s: float) -> float | None:
         """The robot's speed at stream time ``t_s`` (None when unknown)."""
+        return self.speed_with_note(t_s)[0]
+
+    def speed_with_note(self, t_s: float) -> tuple[float | None, str]:
+        """The speed to label with at stream time ``t_s``, and how it is known.
+
+        A fresh, plausible reading (finite, 0 to :data:`MAX_SPEED_MPS`) is used as it is.
+        Otherwise (no reading yet, a NaN or a gap in the odometry, an implausible value, a
+        live feed silent for over :data:`SPEED_STALE_S`) the last good reading is used and
+        the note says so; before any, the speed is None ("none received yet"). A missing
+        speed never stops the stream.
+        """
+        if self.speed is None:  # no speed given: nothing to note
+            return None, ""
         v = self.speed(t_s) if callable(self.speed) else self.speed
-        return None if v is None or not np.isfinite(v) else float(v)
+        age = getattr(self.speed, "age_s", None)
+        age_s = age() if callable(age) else 0.0
+        good = v is not None and np.isfinite(v) and 0 <= v <= MAX_SPEED_MPS
+        if good:
+            if age_s is None or age_s <= SPEED_STALE_S:
+                self._last_speed = (float(v), t_s)
+                return float(v), ""
+            return float(v), f"last known {v:g} m/s, {age_s:.1f} s old"  # a silent feed
+        if self._last_speed is None:
+            return None, "none received yet"
+        last, when = self._last_speed
+        return last, f"last known {last:g} m/s, {t_s - when:.1f} s old"
 
     def warm_up(self, saved_programs: str | Path | None = None) -> None:
         """Compile the model's path once, so that the first window's latency is honest.
@@ -176,7 +209,8 @@ class OnlineClassifier:
         """
         if saved_programs is not None and hasattr(self.model, "use_saved_program"):
             self.model.use_saved_program(saved_programs)
-        self.model.window_proba(np.zeros(self.model.window), self.speed_at(0.0))
+        # Any plausible speed compiles the same program; the robot's may not be known yet.
+        self.model.window_proba(np.zeros(self.model.window), WARM_UP_SPEED_MPS)
 
     def push(self, t_s: float, value: float) -> WindowLabel | None:
         """Add a sample; return a label when a window is due, else None (model run inline)."""
@@ -216,22 +250,41 @@ class OnlineClassifier:
         if t_s < self._next_s:
             return None
         self._next_s += self.hop_s * max(1, np.ceil((t_s - self._next_s) / self.hop_s + 1e-12))
-        speed = self.speed_at(t_s)
+        speed, note = self.speed_with_note(t_s)
         in_window = np.count_nonzero(self._t > t_s - self.window_s)
         if in_window < self.min_fill * self.model.window:
             self.skipped_windows += 1
             reason = (f"bus starved the window: {in_window} of {self.model.window} samples "
                       f"arrived")  # fmt: skip
-            return PendingWindow(t_s, np.empty(0), arrived, (NO_DATA, reason), speed)
+            return PendingWindow(t_s, np.empty(0), arrived, (NO_DATA, reason), speed, note)
         x = self._window(t_s)
-        fault = self._check(x)
-        if fault is None and speed is not None and speed < self.stop_speed_mps:
-            fault = (STOPPED, f"the robot is stopped ({speed:g} m/s)")
-        if fault is None and self.quiet_std is not None and (sd := np.std(x)) < self.quiet_std:
-            fault = (STOPPED, f"quiet: the signal varies by {sd:.3g} RMS (whisker at rest?)")
-        return PendingWindow(t_s, x, arrived, fault, speed)
+        return PendingWindow(t_s, x, arrived, self.check_window(x, speed), speed, note)
 
-    def _check(self, x: np.ndarray) -> tuple[str, str] | None:
+    def check_window(self, x: np.ndarray, speed: float | None) -> tuple[str, str] | None:
+        """Why a window (on the model's grid) gets no terrain, or None.
+
+        The checks of :attr:`window_checks` in order, the first that objects giving the
+        label and reason; more can be appended (each ``check(x, speed)`` returns
+        ``(label, reason)`` or None).
+        """
+        for check in self.window_checks:
+            if (fault := check(x, speed)) is not None:
+                return fault
+        return None
+
+    def _no_speed(self, x: np.ndarray, speed: float | None) -> tuple[str, str] | None:
+        if speed is None and getattr(self.model, "needs_speed", False):
+            return NO_DATA, "no robot speed received yet (this model needs one)"
+        return None
+
+    def _stopped(self, x: np.ndarray, speed: float | None) -> tuple[str, str] | None:
+        if speed is not None and speed < self.stop_speed_mps:
+            return STOPPED, f"the robot is stopped ({speed:g} m/s)"
+        if self.quiet_std is not None and (sd := np.std(x)) < self.quiet_std:
+            return STOPPED, f"quiet: the signal varies by {sd:.3g} RMS (whisker at rest?)"
+        return None
+
+    def _check(self, x: np.ndarray, speed: float | None = None) -> tuple[str, str] | None:
         """Why the window cannot come from a working sensor, or None."""
         lo, hi = self.limits
         if not np.all(np.isfinite(x)):
@@ -267,13 +320,13 @@ class OnlineClassifier:
         latency = self._clock() - pending.arrived_s
         labels = self.model.labels
         return WindowLabel(pending.t_end_s, labels[k], conf, latency, labels[own],
-                           speed_mps=pending.speed_mps)  # fmt: skip
+                           speed_mps=pending.speed_mps, speed_note=pending.speed_note)  # fmt: skip
 
     def _fault(self, pending: PendingWindow, label: str, reason: str) -> WindowLabel:
         self._recent.clear()  # what came before the fault says nothing about what follows
         latency = self._clock() - pending.arrived_s
         return WindowLabel(pending.t_end_s, label, 0.0, latency, label, reason,
-                           pending.speed_mps)  # fmt: skip
+                           pending.speed_mps, pending.speed_note)  # fmt: skip
 
     def _window(self, t_end: float) -> np.ndarray:
         order = np.argsort(self._t)
@@ -281,367 +334,3 @@ class OnlineClassifier:
         keep = np.isfinite(t)
         grid = t_end - self.window_s + 1.0 / self.model.rate_hz + self._grid
         return np.interp(grid, t[keep], x[keep])
-
-
-class BackgroundClassifier:
-    """Run :meth:`OnlineClassifier.classify` on a worker thread, fed through a short queue.
-
-    The sampling thread hands over cut windows with :meth:`submit` and never waits: when the
-    model falls so far behind that ``max_pending`` windows are queued, the new window is
-    dropped and counted (``dropped``), never the samples. While the worker runs, the
-    interpreter's switch interval is shortened (``switch_interval_s``) so that the sampling
-    thread gets the GIL back within a fraction of a sample period when its sleep ends; the
-    previous interval is restored by :meth:`close`.
-
-    Args:
-        online: The classifier that owns the ring buffer and the model.
-        on_label: Called on the worker thread with each :class:`WindowLabel`.
-        max_pending: Windows that may wait for the model.
-        switch_interval_s: GIL switch interval while running (Python's default is 5 ms,
-            as long as a sample period at 200 Hz).
-    """
-
-    def __init__(
-        self,
-        online: OnlineClassifier,
-        on_label: Callable[[WindowLabel], None],
-        *,
-        max_pending: int = 4,
-        switch_interval_s: float = 5e-4,
-    ):
-        self.online = online
-        self.on_label = on_label
-        self.dropped = 0
-        self._queue: queue.Queue = queue.Queue(maxsize=max_pending)
-        self._error: BaseException | None = None
-        self._switch = switch_interval_s
-        self._previous_switch: float | None = None
-        self._thread = threading.Thread(target=self._run, name="whiskerid-classify", daemon=True)
-
-    def start(self) -> "BackgroundClassifier":
-        """Start the worker thread."""
-        self._previous_switch = sys.getswitchinterval()
-        sys.setswitchinterval(self._switch)
-        self._thread.start()
-        return self
-
-    def submit(self, pending: PendingWindow) -> bool:
-        """Queue a window without waiting; False (and counted) if the queue is full."""
-        if self._error is not None:
-            raise RuntimeError("the classifier thread failed") from self._error
-        try:
-            self._queue.put_nowait(pending)
-        except queue.Full:
-            self.dropped += 1
-            return False
-        return True
-
-    def _run(self) -> None:
-        while (pending := self._queue.get()) is not None:
-            try:
-                self.on_label(self.online.classify(pending))
-            except BaseException as e:  # reported by submit() and close(), not lost
-                self._error = e
-                return
-
-    def close(self, timeout_s: float = 10.0) -> None:
-        """Classify what is queued, stop the worker (waiting at most ``timeout_s``).
-
-        Raises:
-            RuntimeError: If the worker failed (the original error is the cause) or did not
-                finish within ``timeout_s``.
-        """
-        try:
-            if self._thread.is_alive():
-                self._queue.put(None, timeout=timeout_s)
-                self._thread.join(timeout_s)
-        finally:
-            if self._previous_switch is not None:
-                sys.setswitchinterval(self._previous_switch)
-        if self._error is not None:
-            raise RuntimeError("the classifier thread failed") from self._error
-        if self._thread.is_alive():
-            raise RuntimeError(f"the classifier thread did not finish within {timeout_s} s")
-
-
-#: Latencies kept for the summary's percentiles (the most recent ones; a ring buffer).
-LATENCY_KEPT = 65_536
-
-
-@dataclass
-class StreamSummary:
-    """What a stream did, as running counts (printed at the end, and as ``--json``).
-
-    Memory stays constant however long the stream runs: counts per label and per fault
-    reason, and the latencies of the last :data:`LATENCY_KEPT` windows.
-    """
-
-    duration_s: float = 0.0
-    samples: int = 0
-    windows: int = 0
-    label_counts: collections.Counter = field(default_factory=collections.Counter)
-    window_label_counts: collections.Counter = field(default_factory=collections.Counter)
-    fault_counts: collections.Counter = field(default_factory=collections.Counter)
-    fault_episodes: int = 0
-    gaps: int = 0
-    overruns: int = 0
-    bus_errors: dict = field(default_factory=dict)
-    skipped_windows: int = 0
-    dropped_windows: int = 0
-    record: str | None = None
-    stopped_by: str = "duration"
-    last: WindowLabel | None = None
-    _latency: np.ndarray = field(default_factory=lambda: np.zeros(LATENCY_KEPT), repr=False)
-
-    def add(self, w: WindowLabel) -> str | None:
-        """Count a window; return ``"start"`` when it begins a fault episode (a run of
-        windows with the same fault), ``"end"`` when it ends one, else None."""
-        self._latency[self.windows % LATENCY_KEPT] = w.latency_s
-        self.windows += 1
-        self.label_counts[w.label] += 1
-        self.window_label_counts[w.window_label] += 1
-        before = self.last
-        self.last = w
-        if w.fault:
-            self.fault_counts[f"{w.label}: {_kind(w.reason)}"] += 1
-        was = before is not None and before.fault
-        same = was and (before.label, _kind(before.reason)) == (w.label, _kind(w.reason))
-        if w.fault and not same:
-            self.fault_episodes += 1
-            return "start"
-        if was and not w.fault:
-            return "end"
-        return None
-
-    @property
-    def all_failed(self) -> bool:
-        """True when windows were due and none of them got a terrain."""
-        return self.windows > 0 and all(k in FAULT_LABELS for k in self.label_counts)
-
-    def to_dict(self, truth: str | None = None) -> dict:
-        """JSON-able summary; with ``truth`` the fraction of windows labelled right."""
-        lat = self._latency[: min(self.windows, LATENCY_KEPT)] * 1e3
-        counts = dict(sorted(self.label_counts.items()))
-        terrains = {k: v for k, v in counts.items() if k not in FAULT_LABELS}
-        out = {
-            "duration_s": round(self.duration_s, 3),
-            "samples": self.samples,
-            "achieved_rate_hz": round(self.samples / self.duration_s, 3) if self.duration_s else 0,
-            "gaps": self.gaps,
-            "overruns": self.overruns,
-            "bus_errors": self.bus_errors,
-            "windows": self.windows,
-            "skipped_windows": self.skipped_windows,
-            "dropped_windows": self.dropped_windows,
-            "label_counts": counts,
-            "faults": dict(sorted(self.fault_counts.items())),
-            "fault_episodes": self.fault_episodes,
-            "majority_label": max(terrains, key=terrains.get) if terrains else None,
-            "latency_ms": {"p50": _pct(lat, 50), "p99": _pct(lat, 99)},
-            "record": self.record,
-            "stopped_by": self.stopped_by,
-        }
-        if truth is not None:
-            n = self.windows
-            out["truth"] = truth
-            out["fraction_correct"] = round(self.label_counts[truth] / n, 4) if n else None
-            out["fraction_correct_per_window"] = (
-                round(self.window_label_counts[truth] / n, 4) if n else None
-            )
-        return out
-
-
-def _kind(reason: str) -> str:
-    """A fault reason without its numbers (``flat``, ``clipped``, ``bus starved the window``)."""
-    return reason.split(":")[0]
-
-
-def _pct(x: np.ndarray, q: float) -> float | None:
-    return round(float(np.percentile(x, q)), 4) if x.size else None
-
-
-def run_stream(
-    samples: Iterable,
-    online: OnlineClassifier,
-    *,
-    recorder=None,
-    on_label: Callable[[WindowLabel], None] | None = None,
-    background: bool = True,
-    channel: int = 0,
-    summary: StreamSummary | None = None,
-) -> StreamSummary:
-    """Feed samples (``hw.Sample``: ``t_s``, ``code``, ``volts``) to the classifier.
-
-    The model's channel decides what is fed: ``adc`` codes (default) or volts. SIGTERM is
-    turned into a clean stop, like Ctrl-C. :class:`whiskerid.hw.Gap` items (a sampler's
-    ``samples(gaps=True)``) keep the loop turning while the bus is down: the recorder still
-    syncs on its timer, and windows that fall due get ``no-data`` labels.
-
-    Args:
-        samples: The sample stream (e.g. ``Sampler.samples(duration_s=..., gaps=True)``,
-            or a :class:`whiskerid.hw.SamplingProcess` sampling since before the model was
-            loaded). A stream with an ``arrived_s`` attribute gives the latest item's
-            arrival time: latencies then count the time a sample waited before it was read.
-        online: Ring buffer, windowing and model.
-        recorder: Optional :class:`whiskerid.hw.Recorder`; closed at the end. With several
-            columns it gets one row per complete round of inputs.
-        on_label: Called with each label (on the worker thread when ``background``).
-        background: Run the model on a worker thread (:class:`BackgroundClassifier`), so the
-            sampling loop never waits for it: right for a real-time clock. ``False`` runs it
-            inline, one window at a time (a virtual clock, where nothing waits anyway).
-        channel: The input that is classified (``Sample.channel``), when several are read.
-        summary: A summary to fill (e.g. to read its counts while the stream runs).
-
-    Returns:
-        The summary: running counts of labels and faults.
-    """
-    summary = StreamSummary() if summary is None else summary
-    summary.record = None if recorder is None else str(recorder.path)
-    use_volts = getattr(online.model, "channel", None) in ("voltage", "volts")
-    rounds = Rounds(len(recorder.columns)) if recorder is not None and recorder.own_times else None
-    previous = signal.getsignal(signal.SIGTERM)
-
-    def _terminate(signum, frame):
-        raise KeyboardInterrupt
-
-    def _labelled(label: WindowLabel) -> None:
-        summary.add(label)
-        if on_label is not None:
-            on_label(label)
-
-    worker = BackgroundClassifier(online, _labelled).start() if background else None
-    signal.signal(signal.SIGTERM, _terminate)
-    # Samples that waited (in a sampling process's pipe) carry their arrival time.
-    waited = samples if hasattr(samples, "arrived_s") else None
-    try:
-        for s in samples:
-            arrived = None if waited is None else waited.arrived_s
-            if isinstance(s, Gap):
-                if recorder is not None:
-                    recorder.maybe_sync()
-                pending = online.gap(s.t_s, arrived) if s.channel == channel else None
-            else:
-                summary.samples += 1
-                summary.duration_s = s.t_s
-                if rounds is not None:
-                    if (row := rounds.push(s)) is not None:
-                        recorder.write_round(*row)
-                elif recorder is not None:
-                    recorder.write(s.t_s, s.code)
-                if s.channel != channel:
-                    continue
-                pending = online.cut(s.t_s, s.volts if use_volts else s.code, arrived)
-            if pending is None:
-                continue
-            if worker is not None:
-                worker.submit(pending)
-            else:
-                _labelled(online.classify(pending))
-    except KeyboardInterrupt:
-        summary.stopped_by = "signal"
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-        try:
-            if worker is not None:
-                worker.close()
-                summary.dropped_windows = worker.dropped
-        finally:
-            summary.skipped_windows = online.skipped_windows
-            if recorder is not None:
-                recorder.close()
-    return summary
-
-
-def terrain_source(record, terrain: str, speed_mps: float, duration_s: float | None, *,
-                   seed: int = 0, amplifier: float = AMPLIFIER, chunk_s: float = 60.0):  # fmt: skip
-    """Hall-sensor voltage ``source(t_s)`` of a whisker driven over a simulated terrain.
-
-    The terrain simulator's base motion, whisker and amplified Hall sensor
-    (:func:`whiskerid.terrain.hall_voltage`, the chain the dataset synthesiser uses); the
-    emulated ADS1115 then does the averaging, clipping and quantisation itself.
-
-    With ``duration_s`` None the terrain never ends: it is made ``chunk_s`` seconds at a time,
-    each chunk fresh terrain (its own seed), the next one made on a worker thread from the
-    middle of the current one on, and successive chunks cross-faded over a second.
-    """
-    if duration_s is not None:
-        return _terrain_chunk(record, terrain, speed_mps, duration_s, seed, amplifier)
-
-    def chunk(k: int):
-        return _terrain_chunk(record, terrain, speed_mps, chunk_s + 2 * _FADE_S, [seed, k],
-                              amplifier)  # fmt: skip
-
-    return _EndlessTerrain(chunk, chunk_s)
-
-
-#: Cross-fade between chunks of an endless terrain, and the start-up transient each chunk's
-#: whisker simulation drops (it starts at rest), in seconds.
-_FADE_S = 1.0
-
-
-def _terrain_chunk(record, terrain, speed_mps, duration_s, seed, amplifier):
-    rng = np.random.default_rng([*np.atleast_1d(seed), 7919])
-    t, acc = base_acceleration(terrain, speed_mps, duration_s + 1.0, rng)
-    volts = np.asarray(hall_voltage(record.whisker(), amplified_hall(record, amplifier), t, acc))
-    keep = t >= 0
-    return source_from_recording(t[keep], volts[keep])
-
-
-class _EndlessTerrain:
-    """Chunk ``k`` of the terrain plays over ``[k C, (k + 1) C]`` (``C = chunk_s``), taken
-    from its own simulation after a second of start-up, and fades into chunk ``k + 1``
-    over the first second of the latter."""
-
-    def __init__(self, make: Callable[[int], Callable], chunk_s: float):
-        self._make = make
-        self.chunk_s = float(chunk_s)
-        self._chunks: dict[int, Callable] = {}
-        self._ahead: tuple[int, threading.Thread, list] | None = None
-
-    def _chunk(self, k: int) -> Callable:
-        if k not in self._chunks:
-            if self._ahead is not None and self._ahead[0] == k:
-                self._ahead[1].join()
-                made = self._ahead[2]
-                self._ahead = None
-                # A worker that failed left nothing: make it here, where an error is seen.
-                self._chunks[k] = made[0] if made else self._make(k)
-            else:
-                self._chunks[k] = self._make(k)
-            for old in [j for j in self._chunks if j < k - 1]:
-                del self._chunks[old]  # memory stays at two chunks
-        return self._chunks[k]
-
-    def _prefetch(self, k: int) -> None:
-        """Start making chunk ``k + 1`` on a worker thread (halfway through chunk ``k``, so
-        that the start-up, busy compiling, is left alone)."""
-        if self._ahead is None and k + 1 not in self._chunks:
-            box: list = []
-            thread = threading.Thread(target=lambda: box.append(self._make(k + 1)), daemon=True)
-            thread.start()
-            self._ahead = (k + 1, thread, box)
-
-    def _play(self, k: int, t: np.ndarray) -> np.ndarray:
-        # Chunk k's own time 0 is at stream time k C - 2 FADE: its start-up from rest is
-        # over a second before it fades in at k C.
-        return np.asarray(self._chunk(k)(t - k * self.chunk_s + 2 * _FADE_S))
-
-    def __call__(self, t_s):
-        t = np.asarray(t_s, dtype=np.float64)
-        k = int(np.floor(float(np.mean(t)) / self.chunk_s))
-        v = self._play(k, t)
-        if float(np.mean(t)) - k * self.chunk_s > self.chunk_s / 2:
-            self._prefetch(k)
-        into = (t - k * self.chunk_s) / _FADE_S
-        if k > 0 and float(np.min(into)) < 1.0:
-            w = np.clip(into, 0.0, 1.0)
-            v = w * v + (1 - w) * self._play(k - 1, t)
-        return float(v) if v.ndim == 0 else v
-
-
-def open_recorder(path: Path | None, *, rate_hz: float, meta: dict):
-    """A crash-safe CSV recorder of ADC codes, or None; never overwrites (``-1``, ``-2``...)."""
-    if path is None:
-        return None
-    return Recorder(unique_path(path), columns=("adc",), rate_hz=rate_hz, units="code",
-                    metadata=meta)  # fmt: skip

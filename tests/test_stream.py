@@ -426,3 +426,65 @@ def test_a_saved_program_labels_as_the_traced_one(tiny_model, tmp_path):
                                list(traced.nets), hop=traced.hop)  # fmt: skip
     assert other.use_saved_program(tmp_path) is False  # its own program, not the first's
     assert len(list(tmp_path.glob("*.jaxexport"))) == 2
+
+
+def _stream_until_labelled(argv, *, new_session=False, timeout=300):
+    """Start ``whiskerid stream`` in a process; return it once it printed a terrain label,
+    with the stderr lines read so far."""
+    proc = subprocess.Popen([sys.executable, "-m", "whiskerid.cli", "stream", *argv],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=new_session)  # fmt: skip
+    lines = []
+    deadline = time.monotonic() + timeout
+    assert proc.stderr is not None
+    for line in proc.stderr:
+        lines.append(line)
+        if " p = " in line or time.monotonic() > deadline:
+            break
+    return proc, lines
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig, status, group", [(signal.SIGINT, 130, False),
+                                                (signal.SIGTERM, 143, True)])  # fmt: skip
+def test_a_signal_stops_the_stream_with_130_or_143_and_no_starved_window(
+    tiny_model, tmp_path, sig, status, group
+):
+    """SIGTERM to the whole process group (what systemd sends) used to stop the sampling
+    process first: the stream labelled its last windows 'bus starved' and exited 2."""
+    rec = tmp_path / "brick.csv"
+    assert main(["record", str(rec), "--emulate", "brick", "--fast", "--duration", "30"]) == 0
+    argv = ["--model", str(tiny_model), "--replay", str(rec), "--json",
+            "--compile-cache", str(tmp_path / "cache")]  # fmt: skip
+    proc, lines = _stream_until_labelled(argv, new_session=group)
+    try:
+        time.sleep(1.2)  # a few more windows
+        if group:
+            os.killpg(proc.pid, sig)
+        else:
+            proc.send_signal(sig)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    err = "".join(lines) + err
+    assert proc.returncode == status, err
+    assert "no-data" not in err and "starved" not in err and "Traceback" not in err, err
+    summary = json.loads(out)
+    assert summary["stopped_by"] == "signal" and summary["majority_label"] in ("brick", "sand")
+    assert summary["samples"] >= 200 and summary["sampling"]["handoff"]["dropped"] == 0
+
+
+@pytest.mark.slow
+def test_a_real_clock_simulation_plays_its_terrain_to_the_end(tiny_model, tmp_path):
+    """The emulated chip's clock used to start before the model's compilation, the sampler's
+    after it: the simulated terrain (made for the duration + 2 s) ran out before the stream
+    did, and its tail was labelled 'sensor-fault: flat' (a stuck chip that was not there)."""
+    done = subprocess.run([sys.executable, "-m", "whiskerid.cli", "stream", "--model",
+                           str(tiny_model), "--simulate", "brick", "--duration", "8", "--json",
+                           "--quiet", "--compile-cache", "none"],
+                          capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    out = json.loads(done.stdout)
+    assert "sensor-fault" not in out["label_counts"], out
+    assert out["sampling"]["process"] is True  # played by the sampling process
+    assert out["samples"] >= 0.995 * 8 * 200 - 2, out

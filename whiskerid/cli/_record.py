@@ -1,11 +1,13 @@
 """``whiskerid record``: sample ADS1115 inputs to a recording CSV, no model needed."""
 
+import contextlib
+import json
 import math
-import signal
 import sys
 from pathlib import Path
 
-from ._common import CommandError, HelpFormatter
+from .._choices import TERRAINS
+from ._common import WATCH, CommandError, HelpFormatter, Interrupted, interrupts, json_safe
 
 #: When an emulated pluck is released (s): held bent by hand before, so its release is found
 #: as in a real recording.
@@ -79,12 +81,36 @@ def add_parser(sub) -> None:
     p.add_argument(
         "--fast", action="store_true", help="with --emulate: a virtual clock, as fast as possible"
     )
+    p.add_argument(
+        "--priority",
+        choices=("auto", "realtime", "nice", "none"),
+        default="auto",
+        help="priority of the sampling, so that it keeps its schedule on a busy machine: "
+        "auto tries real time (SCHED_FIFO, where permitted), then a raised nice value; the "
+        "one granted is in the summary (ignored with --fast)",
+    )
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.set_defaults(func=run)
 
 
 def run(args) -> dict:
-    """Record until --duration, Ctrl-C or SIGTERM; returns the JSON summary."""
+    """Record until --duration, Ctrl-C or SIGTERM; returns the JSON summary.
+
+    A signal only raises a flag that the sampling loop reads at every slot: the file is
+    closed whole, the summary printed, and the command exits 130 (SIGINT) or 143 (SIGTERM).
+    """
+    policy = interrupts()
+    with policy.deferred():
+        out = _run(args, policy)
+    if policy.signum is not None:
+        if args.json:
+            print(json.dumps(json_safe({"command": "record", **out}), indent=2, allow_nan=False))
+        WATCH.notes.append(lambda: f"kept (complete): {out['out']} ({out['rows']} rows)")
+        raise Interrupted(policy.signum)
+    return out
+
+
+def _run(args, policy) -> dict:
     from .. import hw
 
     _check(args)
@@ -99,7 +125,7 @@ def run(args) -> dict:
     timing = {} if clock is None else {"clock": clock.now_ns, "sleep": clock.sleep}
     bus = _emulated_bus(hw, inputs, args, timing) if args.emulate else hw.open_bus(args.i2c_bus)
     try:
-        return _record(hw, bus, inputs, config, mode, args, timing)
+        return _record(hw, bus, inputs, config, mode, args, timing, policy)
     finally:
         bus.close()
 
@@ -131,7 +157,7 @@ def _config(hw, inputs, args):
             )
         mode = "continuous"
     if args.data_rate is not None:
-        dr = args.data_rate
+        dr = _check_data_rate(args.data_rate, slot_s, mode, args.rate, n)
     elif mode == "continuous":
         dr = 860
     else:
@@ -139,6 +165,27 @@ def _config(hw, inputs, args):
     cfg = hw.Config(mux=inputs[0].mux, fsr_v=args.fsr, data_rate_sps=dr,
                     single_shot=mode == "single-shot")  # fmt: skip
     return cfg, mode
+
+
+def _check_data_rate(dr: int, slot_s: float, mode: str, rate: float, n: int) -> int:
+    """``dr`` if every slot gets a fresh conversion at it, else refused: a slower data rate
+    would repeat old conversions under new timestamps, and the file would claim a rate its
+    samples do not have."""
+    from .. import hw
+    from ..io._ads1115_spec import DATA_RATES_SPS
+
+    if dr not in DATA_RATES_SPS:
+        return dr  # refused by the chip's configuration, in its own words
+    fits = dr >= n * rate if mode == "continuous" else 1.0 / dr <= slot_s
+    if not fits:
+        fastest = hw.data_rate_for(slot_s) if mode == "single-shot" else 860
+        raise ValueError(
+            f"--data-rate {dr} SPS converts in {1e3 / dr:.3g} ms, longer than the "
+            f"{slot_s * 1e3:.3g} ms slot of --rate {rate:g} Hz ({n} input(s)): each sample "
+            f"would not be a fresh conversion; use --data-rate {fastest} or more, or leave it "
+            "out"
+        )
+    return dr
 
 
 def _emulated_bus(hw, inputs, args, timing):
@@ -153,13 +200,37 @@ def _sources(inputs, args) -> list:
 
     what = args.emulate
     if Path(what).suffix.lower() in (".csv", ".npz", ".npy"):
+        rec = _read_source(what, args.rate)
         try:
-            return hw.replay_sources(what, [i.name for i in inputs], fsr_v=args.fsr)
+            return hw.replay_sources(rec, [i.name for i in inputs], fsr_v=args.fsr)
         except ValueError as e:
             raise CommandError(str(e)) from None
     if what == "pluck":
         return [_pluck(args)] * len(inputs)
+    if what not in TERRAINS:
+        raise CommandError(f"--emulate {what!r}: not a recording file (.csv, .npz, .npy), "
+                           f"'pluck' or a terrain ({', '.join(TERRAINS)})")  # fmt: skip
     return [_terrain(args, what, j) for j in range(len(inputs))]
+
+
+def _read_source(path: str, rate: float):
+    """The recording to play, refused when its times are not seconds (a rate far below the
+    one it is recorded at)."""
+    from ..io import RATE_METADATA_TOLERANCE, RecordingError, read_recording, recording_rate
+
+    try:
+        rec = read_recording(path)
+        own = recording_rate(rec)
+    except RecordingError as e:
+        raise CommandError(str(e)) from None
+    if own < rate * (1 - RATE_METADATA_TOLERANCE):
+        hint = " (is the time column in seconds?)" if own < rate / 50 else ""
+        raise CommandError(
+            f"--emulate {path}: sampled at {own:.4g} Hz{hint}, below the --rate {rate:g} Hz "
+            f"it would be recorded at: write its times in seconds, or record at --rate "
+            f"{own:.4g}"
+        )
+    return rec
 
 
 def _pluck(args):
@@ -189,7 +260,7 @@ def _terrain(args, terrain: str, j: int):
                           seed=args.seed + j)  # fmt: skip
 
 
-def _record(hw, bus, inputs, config, mode, args, timing) -> dict:
+def _record(hw, bus, inputs, config, mode, args, timing, policy) -> dict:
     names = [i.name for i in inputs]
     n = len(inputs)
     adc = hw.converter(bus, inputs, config=config, **timing)
@@ -209,28 +280,30 @@ def _record(hw, bus, inputs, config, mode, args, timing) -> dict:
         meta["speed_mps"] = args.speed
     rounds = hw.Rounds(n)
     value = (lambda c: to_volts(c)) if args.units == "V" else (lambda c: c)
-    previous = signal.getsignal(signal.SIGTERM)
     stopped_by = "duration"
-
-    def _terminate(signum, frame):
-        raise KeyboardInterrupt
-
+    # Raised while sampling, after any simulation (only this thread, not JAX's), and put
+    # back after it.
+    raised = contextlib.nullcontext("virtual clock") if args.fast else hw.raised_priority(
+        args.priority)  # fmt: skip
     rec = hw.Recorder(args.out, columns=names, rate_hz=args.rate, units=args.units,
                       own_times=n > 1, metadata=meta, **({"clock": timing["clock"]} if timing
                                                         else {}))  # fmt: skip
-    signal.signal(signal.SIGTERM, _terminate)
+    priority = None
     try:
-        for s in sampler.samples(duration_s=args.duration, gaps=True):
-            if isinstance(s, hw.Gap):
-                rec.maybe_sync()  # keep what came before durable while the bus is down
-            elif n == 1:
-                rec.write(s.t_s, value(s.code))
-            elif (row := rounds.push(s)) is not None:
-                rec.write_round(row[0], [value(c) for c in row[1]])
-    except KeyboardInterrupt:
+        with raised as priority:
+            for s in sampler.samples(duration_s=args.duration, gaps=True):
+                if policy.stop_requested():
+                    stopped_by = "signal"
+                    break
+                if isinstance(s, hw.Gap):
+                    rec.maybe_sync()  # keep what came before durable while the bus is down
+                elif n == 1:
+                    rec.write(s.t_s, value(s.code))
+                elif (row := rounds.push(s)) is not None:
+                    rec.write_round(row[0], [value(c) for c in row[1]])
+    except KeyboardInterrupt:  # a second signal
         stopped_by = "signal"
     finally:
-        signal.signal(signal.SIGTERM, previous)
         rec.close()
     st = sampler.stats
     span = (st.samples / n) / args.rate if st.samples else 0.0
@@ -246,6 +319,7 @@ def _record(hw, bus, inputs, config, mode, args, timing) -> dict:
         "overruns": st.overruns,
         "incomplete_rounds": rounds.incomplete,
         "last_error": st.last_error,
+        "priority": priority,
         "stopped_by": stopped_by,
     }
     print(f"record: {rec.rows} rows of {', '.join(names)} at {args.rate:g} Hz "

@@ -1,11 +1,27 @@
 """``whiskerid stream``: classify terrain online from an ADS1115 (real or emulated)."""
 
+import contextlib
+import dataclasses
+import json
 import math
 import sys
+import tempfile
 from pathlib import Path
 
+import numpy as np
+
 from ._cache import CACHE_ENV, cache_dir, use_compile_cache
-from ._common import CommandError, HelpFormatter, check_outputs, model_folder, record_or_paper
+from ._common import (
+    WATCH,
+    CommandError,
+    HelpFormatter,
+    Interrupted,
+    check_outputs,
+    interrupts,
+    json_safe,
+    model_folder,
+    record_or_paper,
+)
 
 
 def add_parser(sub) -> None:
@@ -105,6 +121,14 @@ def add_parser(sub) -> None:
         f"program: a restart reuses both instead of tracing and compiling again "
         f"(default ${CACHE_ENV}, else ~/.cache/whiskerid/jax; 'none' turns it off)",
     )
+    p.add_argument(
+        "--priority",
+        choices=("auto", "realtime", "nice", "none"),
+        default="auto",
+        help="priority of the sampling process, so that it keeps its schedule on a busy "
+        "machine: auto tries real time (SCHED_FIFO, where permitted: root, or LimitRTPRIO in "
+        "a systemd unit), then a raised nice value; the one granted is in the summary",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the simulated terrain")
     p.add_argument("--quiet", action="store_true", help="no line per window on stderr")
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
@@ -112,7 +136,25 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> dict:
-    """Stream until --duration, Ctrl-C or SIGTERM; returns the JSON summary."""
+    """Stream until --duration, Ctrl-C or SIGTERM; returns the JSON summary.
+
+    A signal only raises a flag (never an exception inside whatever runs when it lands):
+    the stream stops at the next sample, prints its summary and exits 130 or 143.
+    """
+    policy = interrupts()
+    with policy.deferred():
+        out = _stream(args, policy)
+    if policy.signum is not None:
+        if args.json:
+            print(json.dumps(json_safe({"command": "stream", **out}), indent=2, allow_nan=False))
+        record = out.get("record")
+        WATCH.notes.append(lambda: "summary printed" + (f"; recorded to {record}" if record
+                                                        else ""))  # fmt: skip
+        raise Interrupted(policy.signum)
+    return out
+
+
+def _stream(args, policy) -> dict:
     from .. import hw
 
     _check_numbers(args)
@@ -135,36 +177,37 @@ def run(args) -> dict:
     model = None
     if args.simulate is not None:  # the simulator needs JAX, and the model's labels first
         model = _load_model(args, cache)
-    replayed = None
-    if args.replay is not None:
-        from ..io import read_recording
-
-        replayed = read_recording(args.replay)
-        if args.duration is None:  # the recording's length: after it there is no signal
-            args.duration = float(replayed.t[-1] - replayed.t[0])
+    replayed = None if args.replay is None else _read_replay(args)
     try:
         cfg = hw.stream_config(inputs, args.rate)
     except ValueError as e:
         raise CommandError(f"--inputs {args.inputs} at --rate {args.rate:g}: {e}") from None
     speed = _speed(args, replayed)
+    with tempfile.TemporaryDirectory(prefix="whiskerid-stream-") as tmp:
+        return _stream_from(hw, args, policy, inputs, cfg, speed, replayed, model, cache,
+                            labels_to, Path(tmp))  # fmt: skip
+
+
+def _stream_from(hw, args, policy, inputs, cfg, speed, replayed, model, cache, labels_to, tmp):
+    """Start the sampler, load the model, stream; ``tmp`` holds a simulated terrain."""
     spec = hw.SamplerSpec(inputs=args.inputs, address=args.address, rate_hz=args.rate,
                           duration_s=args.duration, i2c_bus=args.i2c_bus,
                           replay=None if args.replay is None else str(args.replay),
-                          seed=args.seed)  # fmt: skip
-    # Made here even when a sampling process replays the recording itself: a recording
-    # without the inputs' columns is then refused at once, before anything starts.
-    sources = _sources(hw, args, inputs, replayed)
-    sampler = bus = None
-    if args.simulate is None and not args.fast:
+                          seed=args.seed, priority=args.priority)  # fmt: skip
+    child = not args.fast and (args.simulate is None or _up_front(args))
+    sources = None
+    if child and args.simulate is not None:
+        # The terrain is made now (JAX, here) and played by the sampling process.
+        spec = dataclasses.replace(spec, replay=_save_terrain(hw, inputs, args, tmp))
+    else:
+        # Made here even when a sampling process replays the recording itself: a recording
+        # without the inputs' columns is then refused at once, before anything starts.
+        sources = _sources(hw, args, inputs, replayed)
+    sampler = bus = samples = None
+    if child:
         # Sampling starts now, in a process of its own: the first window fills while JAX
         # starts and the model loads, and the model never holds up the sampling schedule.
         samples = hw.SamplingProcess(spec)
-    else:
-        # The simulator lives here (JAX); a virtual clock never waits: sample inline.
-        clock = hw.FakeClock() if args.fast else None
-        timing = {} if clock is None else {"clock": clock.now_ns, "sleep": clock.sleep}
-        sampler, bus, _, _ = hw.open_sampler(spec, sources=sources, **timing)
-        samples = sampler.samples(duration_s=args.duration, gaps=True)
     sink = recorder = None
     try:
         if model is None:
@@ -176,45 +219,69 @@ def run(args) -> dict:
         online = hw.OnlineClassifier(model, hop_s=args.hop, speed_mps=speed, limits=limits,
                                      quiet_std=quiet)  # fmt: skip
         online.warm_up(cache)  # compile (or load from the cache) before the first window
+        if samples is None:
+            # Sampled here (the endless simulator lives here; a virtual clock never waits):
+            # the chip is made now, after the warm-up, so that its time starts with the
+            # sampler's and the simulated terrain is played from its start.
+            clock = hw.FakeClock() if args.fast else None
+            timing = {} if clock is None else {"clock": clock.now_ns, "sleep": clock.sleep}
+            sampler, bus, _, _ = hw.open_sampler(spec, sources=sources, **timing)
+            samples = sampler.samples(duration_s=args.duration, gaps=True)
         # Opened once the model is ready, so a model that fails leaves no file behind.
         recorder = _open_recorder(hw, args, inputs, _meta(args, inputs, speed, cfg))
         sink = None if labels_to is None else hw.LabelSink(labels_to)
         summary = hw.StreamSummary()
         try:
-            stats = _run(hw, args, samples, online, recorder, sink, summary)
+            stats = _run(hw, args, samples, online, recorder, sink, summary, policy)
         except hw.SamplingError as e:
             raise CommandError(f"{_source_name(args)}: {e}") from None
     finally:
         if isinstance(samples, hw.SamplingProcess):
             samples.close()
         if recorder is not None:
-            recorder.close()  # run_stream closes it; here for a failure before it ran
+            with contextlib.suppress(OSError, ValueError):
+                recorder.close()  # run_stream closes it; here for a failure before it ran
         for closing in (sink, speed if isinstance(speed, hw.SpeedFeed) else None, bus):
             if closing is not None:
                 closing.close()
+    return _report(args, samples, sampler, stats, summary, policy)
+
+
+def _report(args, samples, sampler, stats, summary, policy) -> dict:
+    """The summary on stderr, and as the command's JSON."""
     summary.samples, summary.duration_s = stats.samples, stats.duration_s
     summary.skipped_windows, summary.dropped_windows = stats.skipped_windows, stats.dropped_windows
     summary.record, summary.stopped_by = stats.record, stats.stopped_by
+    summary.record_stopped = stats.record_stopped
     st = samples.stats if sampler is None else sampler.stats
     summary.gaps, summary.overruns = st.gaps, st.overruns
     summary.bus_errors = {"timeouts": st.timeouts, "other_errors": st.other_errors,
                           "last_error": st.last_error}  # fmt: skip
     out = summary.to_dict(truth=args.simulate)
+    if sampler is None:
+        out["sampling"] = {"process": True, "priority": samples.priority,
+                           "skipped_slots": st.skipped_slots,
+                           "handoff": samples.handoff}  # fmt: skip
+    else:
+        out["sampling"] = {"process": False, "skipped_slots": st.skipped_slots}
     faults = sum(summary.fault_counts.values())
     print(f"stream: {out['samples']} samples, {out['windows']} windows, majority "
           f"{out['majority_label']}, gaps {out['gaps']}, overruns {out['overruns']}, "
           f"fault windows {faults} in {out['fault_episodes']} episode(s), "
           f"dropped {out['dropped_windows']}"
           + _right(out, args.simulate)
-          + (f", recorded to {out['record']}" if out["record"] else ""),
+          + (f", recorded to {out['record']}" if out["record"] else "")
+          + (f"; {out['record_stopped']}" if out["record_stopped"] else "")
+          + (f"; {summary.stale_speed_windows} window(s) labelled without a fresh speed"
+             if summary.stale_speed_windows else ""),
           file=sys.stderr)  # fmt: skip
-    if summary.all_failed:
+    if summary.all_failed and policy.signum is None:
         reasons = "; ".join(f"{k} ({v})" for k, v in out["faults"].items())
         raise CommandError(f"no window got a terrain: {reasons}")
     return out
 
 
-def _run(hw, args, samples, online, recorder, sink, summary):
+def _run(hw, args, samples, online, recorder, sink, summary, policy):
     """Feed the samples to the classifier; labels go to the sink, the summary and stderr."""
 
     def show(w):
@@ -232,8 +299,11 @@ def _run(hw, args, samples, online, recorder, sink, summary):
 
     # The summary is counted in show(): run_stream gets a throwaway one, so no double count.
     # A virtual clock never waits, so a worker thread would only fall behind: run inline.
+    if policy.stop_requested():  # a signal during the start-up: nothing is streamed
+        return hw.StreamSummary(stopped_by="signal")
     return hw.run_stream(samples, online, recorder=recorder, on_label=show,
-                         background=not args.fast)  # fmt: skip
+                         background=not args.fast, stop=policy.stop_requested,
+                         on_note=lambda note: print(note, file=sys.stderr))  # fmt: skip
 
 
 def _cache_folder(option: str | None) -> Path | None:
@@ -278,10 +348,7 @@ def _speed(args, replayed):
         if args.speed is not None:
             return args.speed
         own = None if replayed is None else replayed.meta.get("speed_mps")
-        try:
-            return float(own) if own is not None else 0.2
-        except ValueError:
-            return 0.2
+        return float(own) if own is not None else 0.2  # checked by _read_replay
     if args.speed_from in ("-",) or args.speed_from.startswith("udp:"):
         try:
             return hw.SpeedFeed(hw.parse_endpoint(args.speed_from, "--speed-from"))
@@ -306,10 +373,58 @@ def _sources(hw, args, inputs, replayed) -> list | None:
             raise CommandError(str(e)) from None
     record = record_or_paper(args.whisker)
     # Up front for a short run; in chunks of fresh terrain for a long or endless one.
-    up_front = args.duration is not None and args.duration <= MAX_UP_FRONT_S
-    horizon = args.duration + 2.0 if up_front else None
+    horizon = args.duration + 2.0 if _up_front(args) else None
     return [hw.terrain_source(record, args.simulate, _nominal(args), horizon,
                               seed=args.seed + j) for j in range(len(inputs))]  # fmt: skip
+
+
+def _up_front(args) -> bool:
+    """Whether the simulated terrain is made before the stream starts (a short run)."""
+    return args.duration is not None and args.duration <= MAX_UP_FRONT_S
+
+
+def _save_terrain(hw, inputs, args, folder: Path) -> str:
+    """The simulated terrain of every input, saved as a recording (volts) for the sampling
+    process to play; its path."""
+    record = record_or_paper(args.whisker)
+    columns, t0 = {}, None
+    for j, inp in enumerate(inputs):
+        t, v = hw.terrain_signal(record, args.simulate, _nominal(args), args.duration + 2.0,
+                                 seed=args.seed + j)  # fmt: skip
+        t0 = t if t0 is None else t0
+        columns[inp.name] = np.interp(t0, t, v)
+    path = folder / "terrain.npz"
+    np.savez(path, t=t0, meta_units="V", **columns)
+    return str(path)
+
+
+def _read_replay(args):
+    """The recording to replay, refused when its timestamps cannot be this stream's (not in
+    seconds, or slower than --rate) or its speed is not plausible."""
+    from ..io import RATE_METADATA_TOLERANCE, RecordingError, read_recording, recording_rate
+
+    rec = read_recording(args.replay)
+    try:
+        own = recording_rate(rec)
+    except RecordingError as e:
+        raise CommandError(str(e)) from None
+    if own < args.rate * (1 - RATE_METADATA_TOLERANCE):
+        hint = " (is the time column in seconds?)" if own < args.rate / 50 else ""
+        raise CommandError(
+            f"--replay {args.replay}: sampled at {own:.4g} Hz{hint}, below the --rate "
+            f"{args.rate:g} Hz it would be streamed at: write its times in seconds, or "
+            f"stream it at --rate {own:.4g}"
+        )
+    if "speed_mps" in rec.meta and args.speed is None and args.speed_from is None:
+        try:
+            from .. import hw
+
+            hw.check_speed_mps(rec.meta["speed_mps"], f"--replay {args.replay} speed_mps")
+        except ValueError as e:
+            raise CommandError(f"{e}, or pass --speed") from None
+    if args.duration is None:  # the recording's length: after it there is no signal
+        args.duration = float(rec.t[-1] - rec.t[0])
+    return rec
 
 
 def _source_name(args) -> str:
@@ -357,10 +472,13 @@ def _check_numbers(args) -> None:
         if value is not None and not (math.isfinite(value) and value > 0):
             hint = " (leave it out to run until Ctrl-C)" if flag == "--duration" else ""
             raise CommandError(f"{flag} {value!r} must be a positive number{hint}")
-    if args.speed is not None and not (math.isfinite(args.speed) and args.speed >= 0):
-        raise CommandError(f"--speed {args.speed!r} must be a number >= 0 (m/s)")
-    if args.simulate is not None and (args.speed or 0) >= 5:
-        raise CommandError(f"--speed {args.speed:g} m/s is not plausible (0 < v < 5)")
+    if args.speed is not None:
+        from .. import hw
+
+        try:
+            hw.check_speed_mps(args.speed, "--speed")
+        except ValueError as e:
+            raise CommandError(str(e)) from None
     if args.simulate is not None and args.speed == 0:
         raise CommandError("--speed 0 with --simulate: a terrain needs a moving robot")
 
