@@ -48,8 +48,8 @@ def add_parser(sub) -> None:
     s.add_argument("--contact", action="store_true",
                    help="put the whisker's tip on the ground: unilateral Hunt-Crossley contact "
                    "and smoothed Coulomb friction per terrain, integrated with diffrax (one "
-                   "Hall sensor; about 1 s of computing per simulated second and run on a "
-                   "laptop CPU); each recording's metadata gains contact, perturbation_hz, "
+                   "Hall sensor; about half a second of computing per simulated second and "
+                   "run on a CPU); each recording's metadata gains contact, perturbation_hz, "
                    "contact_fraction and stick_fraction")  # fmt: skip
     s.add_argument("--preload", type=float, default=1.0, metavar="MM",
                    help="with --contact: how far the undeformed tip would sink into the mean "
