@@ -3,7 +3,16 @@
 from pathlib import Path
 
 from .._choices import SPEEDS_MPS, TERRAINS
-from ._common import FORCE_HELP, CommandError, HelpFormatter, check_outputs, record_or_paper, say
+from ._common import (
+    FORCE_HELP,
+    QUIET_HELP,
+    CommandError,
+    HelpFormatter,
+    check_outputs,
+    record_or_paper,
+    say,
+    show_progress,
+)
 
 
 def add_parser(sub) -> None:
@@ -48,12 +57,13 @@ def add_parser(sub) -> None:
     s.add_argument("--contact", action="store_true",
                    help="put the whisker's tip on the ground: unilateral Hunt-Crossley contact "
                    "and smoothed Coulomb friction per terrain, integrated with diffrax (one "
-                   "Hall sensor; about 1 s of computing per simulated second and run on a "
-                   "laptop CPU); each recording's metadata gains contact, perturbation_hz, "
+                   "Hall sensor; about half a second of computing per simulated second and "
+                   "run on a CPU); each recording's metadata gains contact, perturbation_hz, "
                    "contact_fraction and stick_fraction")  # fmt: skip
     s.add_argument("--preload", type=float, default=1.0, metavar="MM",
                    help="with --contact: how far the undeformed tip would sink into the mean "
                    "ground (mm): sets the static contact force")  # fmt: skip
+    s.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     s.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     s.set_defaults(func=run)
 
@@ -78,7 +88,8 @@ def run(args) -> dict:
                                duration_s=args.duration, seed=args.seed,
                                replace_synthetic=args.force,
                                channels=args.channels, contact=args.contact,
-                               preload_m=args.preload * 1e-3)  # fmt: skip
+                               preload_m=args.preload * 1e-3,
+                               progress=show_progress(args))  # fmt: skip
     say(f"wrote {len(paths)} recordings to {args.out}")
     return {"out": str(args.out), "recordings": len(paths), "terrains": args.terrains,
             "speeds_mps": args.speeds, "runs": args.runs, "duration_s": args.duration,

@@ -51,7 +51,12 @@ def plot_sidebands(path: str | Path, analysis: dict) -> Path:
         ax.set_ylabel("frequency (Hz)")
     for ax in list(axes.flat)[len(labels) :]:
         ax.axis("off")
-    axes.flat[0].legend(fontsize=6, loc="upper left")
+    handles, names = [], []
+    for ax in axes.flat:  # a pair present may be drawn first in any panel
+        for h, n in zip(*ax.get_legend_handles_labels(), strict=True):
+            handles.append(h)
+            names.append(n)
+    axes.flat[0].legend(handles, names, fontsize=6, loc="upper left")
     fig.suptitle("dominant line, perturbation and sidebands by terrain and speed "
                  f"({analysis['resolution_hz']:g} Hz resolution)", fontsize=11)  # fmt: skip
     return _save(fig, path)

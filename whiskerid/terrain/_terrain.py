@@ -291,6 +291,7 @@ def synthesize_dataset(
     channels: int = 1,
     contact: bool = False,
     preload_m: float | None = None,
+    progress: bool = False,
 ) -> list[Path]:
     """Write a labelled dataset ``out/<terrain>/<terrain>_v<speed>_r<run>.csv`` as CSV recordings.
 
@@ -311,6 +312,7 @@ def synthesize_dataset(
         contact: The whisker's tip on the ground (:func:`iter_contact_runs`: unilateral
             contact with friction, one Hall sensor) instead of the base motion alone.
         preload_m: With ``contact``: the nominal preload (m); the default otherwise.
+        progress: A progress bar on stderr, one step per recording written.
 
     Each recording is written as soon as its batch of runs is simulated, so memory does
     not grow with the number of runs and an interrupted call leaves whole files.
@@ -340,6 +342,13 @@ def synthesize_dataset(
     else:
         recs = iter_runs(specs, record=record, duration_s=duration_s, seed=seed,
                          channels=channels)  # fmt: skip
+    if progress:
+        import sys
+
+        from tqdm import tqdm
+
+        recs = tqdm(recs, total=len(specs), desc="dataset synth", unit="run", file=sys.stderr,
+                    leave=False)  # fmt: skip
     return [write_csv(path, rec) for path, rec in zip(paths, recs, strict=True)]
 
 
