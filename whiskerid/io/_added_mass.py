@@ -70,7 +70,8 @@ def _checked(kg: float, std: float, where: str) -> tuple[float, float]:
 
 
 def mass_from_meta(meta: dict[str, str]) -> tuple[float, float] | None:
-    """The added tip mass and its 1σ (kg) of a recording's metadata, or None if it has none.
+    """The added tip mass and its 1σ (kg) of a recording's metadata, or None if it has none
+    (or 0).
 
     Raises:
         ValueError: A value that is not a positive number.
@@ -83,6 +84,8 @@ def mass_from_meta(meta: dict[str, str]) -> tuple[float, float] | None:
         kg = float(text)
     except ValueError:
         raise ValueError(f"{ADDED_MASS_KEY}: {text!r} is not a number (kg)") from None
+    if kg == 0:  # written for the plain whisker's plucks
+        return None
     err = meta.get(ADDED_MASS_STD_KEY)
     if err is None:
         std = rounding_std(text) if re.fullmatch(_NUMBER, text) else 0.0
