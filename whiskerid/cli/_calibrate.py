@@ -57,7 +57,12 @@ def add_calibrate(sub, command_error) -> None:
         default="levenberg-marquardt",
         help="least-squares solver (optimistix)",
     )
-    p.add_argument("--plot", type=Path, help="save data, fit and residuals as this PNG")
+    p.add_argument(
+        "--plot",
+        type=Path,
+        help="save data, fit and residuals as this PNG (with added masses: the decays without "
+        "and with the mass, and the frequency shift)",
+    )
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.set_defaults(func=lambda args: _cmd_calibrate(args, command_error, p))
@@ -208,9 +213,9 @@ def _cmd_calibrate(args, command_error, parser) -> dict:
     print(f"wrote {args.out}", file=sys.stderr)
     out = {**cal.to_json(), "out": str(args.out)}
     if args.plot:
-        from ..plot import plot_calibration
+        from ..plot import plot_added_mass, plot_calibration
 
-        plot_calibration(args.plot, cal)
+        (plot_calibration if masses is None else plot_added_mass)(args.plot, cal)
         out["plot"] = str(args.plot)
         print(f"wrote {args.plot}", file=sys.stderr)
     if cal.status != "ok":

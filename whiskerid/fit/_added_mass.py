@@ -100,6 +100,7 @@ class AddedMassProblem(FitProblem):
         return int(self.added_kg.shape[0])
 
     def zero_params(self) -> dict:
+        """A parameter pytree of the right structure, all zeros (see the class)."""
         theta = super().zero_params()
         n = self.n_configs
         theta["zeta_u"] = np.zeros((n, self.n_modes) if self.zeta_per_mode else (n,))
@@ -130,9 +131,11 @@ class AddedMassProblem(FitProblem):
         return self.whisker_config(params, 0)
 
     def whisker_of(self, params, j: int) -> Whisker:
+        """The whisker of recording ``j``: its configuration's tip mass and ζ."""
         return self.whisker_config(params, self.config_of[j])
 
     def design(self, params, *, profile: bool = False) -> list[tuple[Array, Array]]:
+        """``(D, g)`` of every recording, each with its configuration's whisker."""
         ws = [self.whisker_config(params, k) for k in range(self.n_configs)]
         return [
             recording_design(r, ws[k], p, profile=profile)
@@ -144,6 +147,7 @@ class AddedMassProblem(FitProblem):
         return params["mass_u"]
 
     def residuals(self, params) -> Array:
+        """Weighted residuals of all recordings, then the masses' prior rows."""
         return jnp.concatenate([super().residuals(params), self.prior_residuals(params)])
 
     def reported(self, params) -> dict[str, Array]:
