@@ -179,3 +179,36 @@ def test_cli_added_mass_fit(tmp_path, pair, capsys, monkeypatch, request):
     js = json.loads(capsys.readouterr().out)
     assert js["sources"]["C"] == "fit (added mass)"
     assert abs(js["params"]["C"]["value"] - C_TRUE) <= 3 * js["params"]["C"]["std"]
+
+
+def test_record_writes_the_added_mass_into_the_recording(tmp_path, capsys):
+    from whiskerid.io import Recording, read_recording, write_csv
+
+    t = np.arange(0, 2.0, 1e-4)
+    src = write_csv(tmp_path / "src.csv", Recording(t=t, columns={"A0": 1.6 + 0 * t},
+                                                   meta={"units": "V"}))  # fmt: skip
+    out = tmp_path / "loaded.csv"
+    argv = ["record", str(out), "--emulate", str(src), "--fast", "--duration", "0.5",
+            "--added-mass", "520mg±10mg"]  # fmt: skip
+    assert main(argv) == 0
+    assert mass_from_meta(read_recording(out).meta) == pytest.approx((5.2e-4, 1e-5))
+    bad = ["record", str(tmp_path / "b.csv"), *argv[2:-1], "lots"]
+    assert main(bad) == 2
+    assert "--added-mass" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_the_posterior_samples_the_added_mass_model(pair):
+    from whiskerid.posterior import sample_posterior
+
+    masses = [None, AddedMass(0.25 * BEAM_KG, 0.002 * BEAM_KG)]
+    cal = calibrate(REC, pair, added_mass=masses)
+    post = sample_posterior(REC, pair, walkers=24, steps=1500, seed=1, added_mass=masses,
+                            n_modes=2)  # fmt: skip
+    for name in ("C", "EI", "zeta_mass1"):
+        q, c = post.params[name], cal.params[name]
+        half = 0.5 * (q["q84"] - q["q16"])
+        assert abs(q["median"] - c["value"]) < 0.5 * c["std"], name
+        assert 0.7 < half / c["std"] < 1.4, (name, half, c["std"])
+    c = post.params["C"]
+    assert c["q2.5"] < C_TRUE < c["q97.5"]
