@@ -160,12 +160,14 @@ def one_case(rate, ratio, seed, plucks=1, mass_std=0.0):
     """One fit: ``plucks`` plain and loaded plucks; the stated mass is the true one plus a
     draw of its 1σ ``mass_std`` (the weighing's error, which the 1σ must cover)."""
     m = ratio * BEAM_KG
-    stated = m + mass_std * np.random.default_rng(seed + 5000).standard_normal()
+    # every case its own noise: seeds distinct per rate, mass ratio, repeat and weighing
+    case = int(rate) * 10**7 + round(ratio * 1000) * 10**4 + seed * 10 + (mass_std > 0) * 5
+    stated = m + mass_std * np.random.default_rng(case + 9).standard_normal()
     obs, masses = [], []
     for p in range(plucks):
         obs += [
-            observation(0.0, 0.02, rate, 1000 * seed + 2 * p),
-            observation(m, 0.018, rate, 1000 * seed + 2 * p + 1),
+            observation(0.0, 0.02, rate, case + 2 * p),
+            observation(m, 0.018, rate, case + 2 * p + 1),
         ]
         masses += [None, AddedMass(stated, mass_std)]
     t0 = time.perf_counter()
