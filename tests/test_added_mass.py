@@ -212,3 +212,20 @@ def test_the_posterior_samples_the_added_mass_model(pair):
         assert 0.7 < half / c["std"] < 1.4, (name, half, c["std"])
     c = post.params["C"]
     assert c["q2.5"] < C_TRUE < c["q97.5"]
+
+
+@pytest.mark.slow
+def test_two_masses_fit_jointly_and_improve_on_one(pair, fitted):
+    heavy = fe_pluck(0.5 * BEAM_KG, zeta=0.015, seed=31)
+    masses = [
+        None,
+        AddedMass(0.25 * BEAM_KG, 0.002 * BEAM_KG),
+        AddedMass(0.5 * BEAM_KG, 0.004 * BEAM_KG),
+    ]
+    cal = calibrate(REC, [*pair, heavy], added_mass=masses)
+    p = cal.params
+    assert cal.status == "ok", cal.warnings
+    assert abs(p["C"]["value"] - C_TRUE) <= 3 * p["C"]["std"]
+    assert p["C"]["std"] < 0.9 * fitted.params["C"]["std"]
+    assert p["zeta_mass2"]["value"] == pytest.approx(0.015, rel=0.05)
+    assert p["mu_mass2"]["value"] == pytest.approx(0.5, rel=0.05)
