@@ -1,9 +1,11 @@
 """``whiskerid calibrate``: fit a whisker's κ (f_1), ζ and EI or C to recordings."""
 
 import argparse
+import math
 from pathlib import Path
 
 from .._choices import EXCITATIONS, OBSERVABLES, PINS, SOLVERS
+from ._added_mass import add_added_mass_option, added_masses
 from ._common import FORCE_HELP, HelpFormatter, check_outputs
 
 
@@ -34,6 +36,13 @@ def add_calibrate(sub, command_error) -> None:
         default="auto",
         help="what fixes EI or C without a static test (auto = geometry)",
     )
+    p.add_argument(
+        "--modulus-tolerance",
+        type=float,
+        default=0.2,
+        help="--pin material: relative 1-sigma of the record's modulus, carried into rho a's "
+        "and C's 1-sigma (0.2: spring wires' spread and the equivalent-beam convention)",
+    )
     p.add_argument("--modes", type=int, default=2, help="modes in the model")
     p.add_argument(
         "--f1-start",
@@ -48,7 +57,12 @@ def add_calibrate(sub, command_error) -> None:
         default="levenberg-marquardt",
         help="least-squares solver (optimistix)",
     )
-    p.add_argument("--plot", type=Path, help="save data, fit and residuals as this PNG")
+    p.add_argument(
+        "--plot",
+        type=Path,
+        help="save data, fit and residuals as this PNG (with added masses: the decays without "
+        "and with the mass, and the frequency shift)",
+    )
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.set_defaults(func=lambda args: _cmd_calibrate(args, command_error, p))
@@ -58,7 +72,7 @@ def add_calibrate(sub, command_error) -> None:
 #: that ``posterior`` reads the recordings as the fit did.
 DATA_OPTIONS = (
     *("observable", "time_col", "signal_col", "scale", "units_g", "excitation", "fb", "hb"),
-    *("base_col", "sensor_x", "fit_gain", "gain_known", "t_start", "t_end"),
+    *("base_col", "sensor_x", "fit_gain", "gain_known", "t_start", "t_end", "added_mass"),
 )
 
 
@@ -108,6 +122,7 @@ def add_data_options(p: argparse.ArgumentParser) -> None:
         help="use samples from this time (s); decay: the release is detected by default",
     )
     p.add_argument("--t-end", type=float, help="use samples up to this time (s)")
+    add_added_mass_option(p)
 
 
 def check_data_options(args) -> None:
@@ -166,11 +181,20 @@ def _cmd_calibrate(args, command_error, parser) -> dict:
     inputs = {"REC": args.recordings, "--whisker": args.whisker, "--static": args.static}
     check_outputs({"--out": args.out, "--plot": args.plot}, inputs, force=args.force)
     check_data_options(args)
+    if not (math.isfinite(args.modulus_tolerance) and 0 <= args.modulus_tolerance < 1):
+        raise command_error(
+            f"--modulus-tolerance {args.modulus_tolerance!r} must be a relative 1-sigma in "
+            "[0, 1), e.g. 0.05 for 5 %"
+        )
     record = load_record(args.whisker)
     columns = _plane_columns(args.signal_col, command_error)
     if columns is not None:
         return _calibrate_planes(args, parser, record, columns, command_error)
-    obs = [o for p in args.recordings for o in load_observations(p, record, args)]
+    obs_lists = [load_observations(p, record, args) for p in args.recordings]
+    obs = [o for lst in obs_lists for o in lst]
+    masses = added_masses(args.added_mass, args.recordings, obs_lists, command_error)
+    if masses is not None:
+        _check_added_mass(args, command_error)
     static = read_static_test(args.static) if args.static else None
     cal = calibrate(
         record,
@@ -181,15 +205,17 @@ def _cmd_calibrate(args, command_error, parser) -> dict:
         pin=args.pin,
         solver=args.solver,
         f1_start_hz=args.f1_start,
+        added_mass=masses,
+        modulus_tolerance=args.modulus_tolerance,
     )
     _with_options(cal.record, args, parser).save(args.out)
     print(cal.report(), file=sys.stderr)
     print(f"wrote {args.out}", file=sys.stderr)
     out = {**cal.to_json(), "out": str(args.out)}
     if args.plot:
-        from ..plot import plot_calibration
+        from ..plot import plot_added_mass, plot_calibration
 
-        plot_calibration(args.plot, cal)
+        (plot_calibration if masses is None else plot_added_mass)(args.plot, cal)
         out["plot"] = str(args.plot)
         print(f"wrote {args.plot}", file=sys.stderr)
     if cal.status != "ok":
@@ -198,6 +224,16 @@ def _cmd_calibrate(args, command_error, parser) -> dict:
             file=sys.stderr,
         )
     return out
+
+
+def _check_added_mass(args, command_error) -> None:
+    """Refuse what the added-mass method does not combine with."""
+    if args.static:
+        raise command_error("--static and added masses both fix EI: give one of them")
+    if args.pin != "auto":
+        raise command_error(
+            f"--pin {args.pin}: with added masses the plucks determine EI and C; leave --pin out"
+        )
 
 
 def _with_options(record, args, parser):
@@ -236,6 +272,8 @@ def _calibrate_planes(args, parser, record, columns, command_error) -> dict:
     from ..fit import calibrate
     from ..terrain import SensorPlanes, plane_records
 
+    if args.added_mass:
+        raise command_error("--added-mass calibrates one plane: give one --signal-col at a time")
     if args.static:
         raise command_error(
             "--static fixes EI of one plane: calibrate the two planes without it, "

@@ -5,6 +5,7 @@ import sys
 from pathlib import Path
 
 from .._choices import LIKELIHOODS, MOVES, PINS
+from ._added_mass import added_masses
 from ._calibrate import DATA_OPTIONS, add_data_options, check_data_options, load_observations
 from ._common import (
     QUIET_HELP,
@@ -108,7 +109,9 @@ def _cmd_posterior(args, command_error, parser) -> dict:
 
     record = load_record(args.fit)
     used = fit_options(args, parser, record)
-    obs = [o for p in args.recordings for o in load_observations(p, record, args)]
+    obs_lists = [load_observations(p, record, args) for p in args.recordings]
+    obs = [o for lst in obs_lists for o in lst]
+    masses = added_masses(args.added_mass, args.recordings, obs_lists, command_error)
     _note_data_size(obs, record, args)
     static = read_static_test(args.static) if args.static else None
     settings = _settings(args, used)
@@ -133,6 +136,7 @@ def _cmd_posterior(args, command_error, parser) -> dict:
                 progress=show_progress(args),
                 move=args.move,
                 static=static,
+                added_mass=masses,
                 n_modes=args.modes,
                 pin=args.pin,
                 likelihood=args.likelihood,

@@ -77,6 +77,13 @@ def add_parser(sub) -> None:
         help="robot speed (m/s), written as speed_mps metadata for train and classify; "
         "drives --emulate TERRAIN (0.2 there by default)",
     )
+    p.add_argument(
+        "--added-mass",
+        metavar="MASS",
+        help="a known mass clipped to the whisker's tip for this recording (e.g. 0.52g±0.01g), "
+        "written as added_mass_kg and added_mass_std_kg metadata: calibrate fits plucks with "
+        "and without it jointly for EI and C (pluck, clip the mass, pluck again)",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the emulated signal and noise")
     p.add_argument(
         "--fast", action="store_true", help="with --emulate: a virtual clock, as fast as possible"
@@ -140,6 +147,13 @@ def _check(args) -> None:
         raise CommandError("--fast needs --emulate (a real chip runs in real time)")
     if args.fast and args.duration is None:
         raise CommandError("--fast needs --duration (a virtual clock would never stop)")
+    if args.added_mass is not None:
+        from ..io import parse_mass
+
+        try:
+            args.added_mass_kg = parse_mass(args.added_mass)
+        except ValueError as e:
+            raise CommandError(f"--added-mass: {e}") from None
 
 
 def _config(hw, inputs, args):
@@ -234,7 +248,8 @@ def _read_source(path: str, rate: float):
 
 
 def _pluck(args):
-    """The Hall voltage of the whisker held bent by hand and released at PLUCK_DELAY_S.
+    """The Hall voltage of the whisker held bent by hand and released at PLUCK_DELAY_S
+    (with the ``--added-mass`` at its tip, if given).
 
     A pluck has rung down within seconds: longer recordings hold the rest value after it.
     """
@@ -243,7 +258,10 @@ def _pluck(args):
     from ._common import record_or_paper
 
     length = min(args.duration or PLUCK_SPAN_S, PLUCK_SPAN_S) + 1.0
-    sim, _ = simulate_pluck(record_or_paper(args.whisker), kind="held", observable="voltage",
+    whisker = record_or_paper(args.whisker)
+    if args.added_mass is not None:  # the emulated whisker carries the clipped mass too
+        whisker = whisker.replace(tip_mass_kg=whisker.tip_mass_kg + args.added_mass_kg[0])
+    sim, _ = simulate_pluck(whisker, kind="held", observable="voltage",
                             rate_hz=20_000.0, duration_s=length, release_s=PLUCK_DELAY_S,
                             noise_db=None, seed=args.seed)  # fmt: skip
     return hw.source_from_recording(sim.t, sim.signal())
@@ -278,6 +296,11 @@ def _record(hw, bus, inputs, config, mode, args, timing, policy) -> dict:
         meta["speed_mps"] = 0.2 if args.speed is None else args.speed
     if args.speed is not None:
         meta["speed_mps"] = args.speed
+    if args.added_mass is not None:
+        from ..io import ADDED_MASS_KEY, ADDED_MASS_STD_KEY
+
+        kg, std = args.added_mass_kg
+        meta[ADDED_MASS_KEY], meta[ADDED_MASS_STD_KEY] = f"{kg:.9g}", f"{std:.9g}"
     rounds = hw.Rounds(n)
     value = (lambda c: to_volts(c)) if args.units == "V" else (lambda c: c)
     stopped_by = "duration"

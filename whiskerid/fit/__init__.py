@@ -11,6 +11,10 @@ covariance.
 
 from .. import _jax_setup as _jax_setup
 from ..io import sha256_of as sha256_of  # where fit's users found it before
+from ._added_mass import AddedMass as AddedMass
+from ._added_mass import AddedMassProblem as AddedMassProblem
+from ._added_mass import calibrate_added_mass as calibrate_added_mass
+from ._added_mass import rho_a_from_frequencies as rho_a_from_frequencies
 from ._batch import BATCH_LANES as BATCH_LANES
 from ._batch import PluckFit as PluckFit
 from ._batch import calibrate_each as calibrate_each
@@ -30,6 +34,7 @@ from ._lsq import from_interval as from_interval
 from ._lsq import gradient_cosine as gradient_cosine
 from ._lsq import least_squares as least_squares
 from ._lsq import to_interval as to_interval
+from ._modulus import MODULUS_TOLERANCE as MODULUS_TOLERANCE
 from ._observation import G0 as G0
 from ._observation import CalibrationError as CalibrationError
 from ._observation import Observation as Observation

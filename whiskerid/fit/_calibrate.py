@@ -60,6 +60,7 @@ from ._checks import (
 )
 from ._checks import lag1 as lag1_autocorr
 from ._lsq import gradient_cosine_from, residual_variance, scaled_inverse_gram
+from ._modulus import MODULUS_TOLERANCE, check_tolerance, modulus_covariance
 from ._observation import CalibrationError, Observation, StaticTest
 from ._problem import (
     FitProblem,
@@ -164,6 +165,8 @@ def calibrate(
     max_steps: int = 400,
     f1_start_hz: float | None = None,
     start: dict | None = None,
+    added_mass: list | None = None,
+    modulus_tolerance: float = MODULUS_TOLERANCE,
 ) -> Calibration:
     """Fit κ (f_1), ζ and the nuisances to one or more recordings (and a static test).
 
@@ -183,6 +186,13 @@ def calibrate(
         start: Start parameters instead of the start search: a pytree of the problem's
             structure (``FitProblem.zero_params()``), e.g. from earlier fits of the same
             recordings.
+        added_mass: One :class:`whiskerid.fit.AddedMass` (or None) per recording: the known
+            mass clipped to the tip for it. Recordings with two or more different tip masses
+            determine EI and ρa (so C) themselves (the added-mass method,
+            :func:`whiskerid.fit.calibrate_added_mass`); ``pin`` and ``static`` are then not
+            used.
+        modulus_tolerance: Relative 1σ of the record's modulus under ``pin="material"``,
+            carried into ρa's and C's 1σ (default 20 %, see ``whiskerid.fit._modulus``).
 
     Returns:
         A :class:`Calibration`; never raises on a failed solve (see ``status``).
@@ -190,6 +200,16 @@ def calibrate(
     obs = [observations] if isinstance(observations, Observation) else list(observations)
     if not obs:
         raise CalibrationError("no recordings to calibrate")
+    modulus_tolerance = check_tolerance(modulus_tolerance)
+    if added_mass is not None:
+        if static is not None:
+            raise CalibrationError("give a static test or added masses, not both")
+        from ._added_mass import calibrate_added_mass
+
+        return calibrate_added_mass(record, obs, list(added_mass), n_modes=n_modes,
+                                    zeta_per_mode=zeta_per_mode, solver=solver,
+                                    max_steps=max_steps, f1_start_hz=f1_start_hz,
+                                    start=start)  # fmt: skip
     if pin not in PINS:
         raise CalibrationError(f"pin must be one of {PINS}, not {pin!r}")
     if not 1 <= n_modes <= 10:
@@ -233,9 +253,10 @@ def calibrate(
             f"HAC (Newey-West, Bartlett weights to lag {lag}; never below the white-noise "
             "1-sigma): the residuals are correlated"
         )
-    params, corr, fixed, note = _report(record, problem, res.value, cov, static, nominal)
+    tol = modulus_tolerance
+    params, corr, fixed, note = _report(record, problem, res.value, cov, static, nominal, tol)
     if cov is not cov_white:
-        white, *_ = _report(record, problem, res.value, cov_white, static, nominal)
+        white, *_ = _report(record, problem, res.value, cov_white, static, nominal, tol)
         for k in params:
             params[k]["std_white"] = white[k]["std"]
     diagnostics = {
@@ -294,12 +315,14 @@ def _blocks(jac, resid, obs):
     return out
 
 
-def _report(record, problem, flat, cov, static, nominal):
+def _report(record, problem, flat, cov, static, nominal, modulus_tolerance=0.0):
     structure = record.structure
     pin = problem.pin
     values, jac = reported_with_jacobian(problem, flat)
     names = reported_names(problem)
     dcov = np.asarray(jac) @ cov @ np.asarray(jac).T
+    if pin == "material" and static is None:  # ρa and C scale with the assumed modulus
+        dcov = dcov + modulus_covariance(names, np.asarray(values), modulus_tolerance)
     std = np.sqrt(np.maximum(np.diag(dcov), 0.0))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = dcov / np.outer(std, std)
@@ -325,6 +348,7 @@ def _report(record, problem, flat, cov, static, nominal):
                 fixed["C"] = structure.coil_factor
         else:
             fixed["EI"] = float(nominal.EI)
+            fixed["modulus_tolerance"] = float(modulus_tolerance)
     what = "f_1 (so kappa = EI/(rho a)) and zeta"
     if static is not None:
         note = (
@@ -347,7 +371,11 @@ def _report(record, problem, flat, cov, static, nominal):
             f"The vibration data determine only {what}. EI is fixed at the record's material value "
             f"({float(nominal.EI):.4g} N m^2); rho a"
             + (" and C are" if coil else " is")
-            + " derived from EI/kappa. EI and C are not both identified."
+            + " derived from EI/kappa. EI and C are not both identified: "
+            + ("C" if coil else "rho a")
+            + f" rests on the assumed modulus, whose {100 * modulus_tolerance:.3g} % (1 sigma, "
+            "--modulus-tolerance) is in its 1-sigma; plucks with and without a known tip "
+            "mass (--added-mass) measure it instead."
         )
     if nominal.tip_mass_kg > 0:
         note += (

@@ -233,6 +233,16 @@ class FitProblem(eqx.Module):
             return Whisker(**fields)
         return _FixedRootsWhisker(**fields, roots=self.roots)
 
+    def whisker_of(self, params, j: int) -> Whisker:
+        """The whisker of recording ``j``: the same for all here; a problem whose recordings
+        carry different tip masses (the added-mass method) gives each its own."""
+        return self.whisker(params)
+
+    def prior_residuals(self, params) -> Array:
+        """Residual rows of parameters fitted under a Gaussian prior (none here; the added
+        masses' rows in the added-mass method), in units of their σ."""
+        return jnp.zeros(0)
+
     def design(self, params, *, profile: bool = False) -> list[tuple[Array, Array]]:
         """``(D, g)`` of every recording at ``params`` (see :func:`recording_design`)."""
         w = self.whisker(params)

@@ -4,6 +4,7 @@ matplotlib is imported when a figure is drawn, not when this package is imported
 optional ``plot`` extra).
 """
 
+from ._added_mass import plot_added_mass as plot_added_mass
 from ._calibrate import plot_calibration as plot_calibration
 from ._classify import plot_confusion as plot_confusion
 from ._fleet import plot_fleet_history as plot_fleet_history

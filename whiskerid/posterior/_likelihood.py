@@ -201,11 +201,13 @@ def log_prob_one(model: _Model, z, args, tables=None):
     tables = tables if tables is not None else (None,) * model.n_rec
     recs = theta.get("recs") or [{}] * model.n_rec
     for j, (rec, rp, grid) in enumerate(zip(problem.recordings, recs, args["grids"], strict=True)):
+        w_j = problem.whisker_of(theta, j)  # its own tip mass in the added-mass model
         lp = lp + _rec_loglik(
-            model, rec, rp, grid, w, log_sigma[j], args["nu"], degrees[j], tables[j]
+            model, rec, rp, grid, w_j, log_sigma[j], args["nu"], degrees[j], tables[j]
         )
     if problem.static_test is not None:
         lp = lp - 0.5 * jnp.sum(problem.static_residuals(theta) ** 2)
+    lp = lp - 0.5 * jnp.sum(problem.prior_residuals(theta) ** 2)  # e.g. the added masses
     return jnp.where(jnp.isfinite(lp), lp, -jnp.inf)
 
 
@@ -238,14 +240,14 @@ def _grid_tables(model, z, args):
     (False for a non-finite ``ω``)."""
     problem = args["problem"]
     theta = _unravel(problem, model.marginal)(z[: model.n_theta])
-    w = problem.whisker(theta)
-    omega = w.omega_rad_s
     tables, ok = [], jnp.array(True)
     recs = zip(problem.recordings, args["grids"], model.grid_degrees, strict=True)
     for j, (rec, grid, degrees) in enumerate(recs):
         if degrees is None:
             tables.append(None)
             continue
+        w = problem.whisker_of(theta, j)
+        omega = w.omega_rad_s
         weight = None
         if not model.marginal:  # W_i = c_cos,i − i c_sin,i (see _grid_columns)
             m = len(degrees)

@@ -83,6 +83,7 @@ def setup_posterior(
     marginalize: bool | None = None,
     prior: dict | None = None,
     f1_start_hz: float | None = None,
+    added_mass: list | None = None,
 ) -> Problem:
     """Fit the calibration model (its Laplace approximation) and build the log-posterior.
 
@@ -100,6 +101,9 @@ def setup_posterior(
             default there); ``False`` samples them.
         prior: A ``[prior]`` table overriding the record's.
         f1_start_hz: Centre of the calibration's start search (the record's f_1 otherwise).
+        added_mass: One :class:`whiskerid.fit.AddedMass` (or None) per recording: sample the
+            added-mass model (EI and ρa fitted, each mass under its stated Gaussian prior),
+            as :func:`whiskerid.calibrate` fits it.
 
     Returns:
         A :class:`Problem`.
@@ -124,7 +128,7 @@ def setup_posterior(
     user = parse_prior(table)
 
     problem, theta_hat, cov_full, sig = _laplace(
-        record, obs, static, n_modes, zeta_per_mode, pin, f1_start_hz
+        record, obs, static, n_modes, zeta_per_mode, pin, f1_start_hz, added_mass
     )
     # Sampled space: the calibration's flat vector (without c when marginalised) + log σ_j.
     idx_tree = problem.unflatten(jnp.arange(cov_full.shape[0], dtype=float))
@@ -155,9 +159,9 @@ def setup_posterior(
         priors[k] = {"dist": v[0], "a": v[1], "b": v[2], "default": False}
     # Free decays on near-uniform timestamps get the gridded columns, with Taylor degrees
     # for the Laplace centre's frequencies (times a margin).
-    omega_hat = np.asarray(w_hat.omega_rad_s)
     grids, grid_degrees = [], []
-    for rec in problem.recordings:
+    for j, rec in enumerate(problem.recordings):
+        omega_hat = np.asarray(problem.whisker_of(theta_s, j).omega_rad_s)
         degrees, grid_arrays = None, None
         if rec.excitation == "decay" and np.size(rec.t) >= 16:
             grid = _decay_grid(np.asarray(rec.t), np.asarray(rec.y))
@@ -209,7 +213,7 @@ def _names(theta, n_rec):
     return names + [f"log_sigma[{j}]" for j in range(n_rec)]
 
 
-def _laplace(record, obs, static, n_modes, zeta_per_mode, pin, f1_start_hz):
+def _laplace(record, obs, static, n_modes, zeta_per_mode, pin, f1_start_hz, added_mass=None):
     """The calibration fit: its problem (recordings weighted by their residual scale), the
     optimum, its covariance (a small diagonal one where that is not finite) and each
     recording's residual scale σ_j in normalised units."""
@@ -221,6 +225,7 @@ def _laplace(record, obs, static, n_modes, zeta_per_mode, pin, f1_start_hz):
         zeta_per_mode=zeta_per_mode,
         pin=pin,
         f1_start_hz=f1_start_hz,
+        added_mass=added_mass,
     )
     problem, cov = cal.problem, np.asarray(cal.covariance)
     if not np.all(np.isfinite(cov)):
