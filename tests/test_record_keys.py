@@ -51,3 +51,31 @@ def test_a_list_of_zeta_must_agree_with_n_modes(tmp_path):
 def test_tables_of_later_stages_are_kept(tmp_path):
     path = _paper(tmp_path, "[sensor]", "[posterior]\nsteps = 3\n\n[sensor]")
     assert load_record(path).extra["posterior"] == {"steps": 3}
+
+
+def test_a_nan_in_a_record_is_refused_by_name(tmp_path):
+    """f1 = NaN in a calibrated record's [fit] table was copied into every record made
+    from it (posterior.toml)."""
+    path = _paper(tmp_path, "[sensor]", "[fit.params.f1_hz]\nvalue = nan\nstd = nan\n\n[sensor]")
+    with pytest.raises(RecordError, match=r"fit\.params\.f1_hz\.value = nan is not a number"):
+        load_record(path)
+    path.write_text(path.read_text().replace("value = nan", "value = 12.0"))
+    assert load_record(path).extra["fit"]["params"]["f1_hz"]["value"] == 12.0
+
+
+def test_a_posterior_too_short_for_tau_writes_no_nan(tmp_path):
+    """posterior --steps 1: τ and ESS cannot be estimated; the record leaves them out and
+    the JSON says null (it wrote tau = nan)."""
+    import numpy as np
+
+    from whiskerid.posterior._summary import Posterior, _updated_record
+
+    q = {"median": 1.0, "tau": float("nan"), "ess": float("nan")}
+    post = Posterior(params={"f1_hz": q}, diagnostics={"converged": False, "message": "m",
+                     "max_tau": float("nan")}, correlations={"names": ["f1_hz"],
+                     "matrix": [[float("nan")]]}, samples=np.zeros((2, 1)), names=["f1_hz"],
+                     chain=np.zeros((1, 2, 1)))  # fmt: skip
+    rec = _updated_record(paper_record(), post)
+    text = rec.to_toml()
+    assert "= nan" not in text and "nan]" not in text and "median = 1.0" in text
+    assert post.to_json()["params"]["f1_hz"]["tau"] is None

@@ -16,19 +16,21 @@ window is therefore checked first, offline (``classify``) and online (``stream``
   spectrum is shaped by them; electrical noise alone has a flat spectrum at a level set by
   the electronics, not the ground.
 
-The spectral shape is described by a few numbers per channel (:func:`descriptors`): the
-log amplitude (RMS), the spectral flatness (geometric over arithmetic mean of the
-periodogram, 1 for a flat spectrum, about ``e^-γ ≈ 0.56`` for one window of white noise,
-far lower for a resonance), and the share of power in each of ten equal bands up to Nyquist.
-A window's score is its Mahalanobis distance, under the training windows' within-class
-covariance, to the nearest class mean of these numbers; it is ``unknown`` above the
-threshold chosen on the training windows (:data:`TRAIN_QUANTILE` of their scores, widened by
-:data:`THRESHOLD_MARGIN`). The numbers are NumPy only: the check costs one FFT per window.
+Noise-likeness is measured by the spectral flatness (geometric over arithmetic mean of the
+periodogram of the Hann-tapered window, mean removed): 1 for a flat spectrum, about
+``e^-γ ≈ 0.56`` on average for one window of white noise, far lower for a resonance. A
+window at least as flat as all but :data:`NOISE_QUANTILE` of white-noise windows of its
+length is noise-like, a check left off for a model whose own training windows are
+noise-like too often. The level (median) and the amplitude (RMS) are compared with the
+training windows' ranges, widely (:data:`LEVEL_MARGIN`, :data:`RMS_MARGIN`): a new
+recording may be quieter or rougher than any trained on, and the sampling chain of a
+deployment (another ADC rate, its filter) reshapes the spectrum's details, so they are not
+compared. The checks are NumPy only: one FFT per window. A window that passes them may
+still be a ground the model never saw; the network's confidence is then the only guide.
 """
 
 import functools
-import itertools
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -37,20 +39,14 @@ UNKNOWN = "unknown"
 
 #: A run of identical samples this long (share of the window) is a stuck reading.
 STUCK_FRACTION = 0.25
-#: Equal bands from DC to Nyquist whose power shares describe the spectrum: fine enough
-#: to place the whisker's first mode and the sampling chain's roll-off near Nyquist.
-N_BANDS = 10
-#: Quantile of the training windows' scores the threshold starts from.
-TRAIN_QUANTILE = 0.999
-#: Factor on that quantile: the training windows set it, new recordings of the same
-#: grounds spread a little wider (held-out recordings, not training ones, measure what it
-#: rejects; see the classify guide).
-THRESHOLD_MARGIN = 1.5
 #: A window as flat in spectrum as all but this share of white-noise windows is noise-like.
 NOISE_QUANTILE = 0.001
 #: Noise-like training windows beyond this share: the model was trained on windows that
 #: look like noise, so it cannot call noise unknown (the noise check is left off).
 NOISE_TRAIN_LIMIT = 0.01
+#: An amplitude (RMS) more than this factor beyond every training window's is far outside
+#: training: wide, since a new recording may be quieter or rougher than any trained on.
+RMS_MARGIN = 10.0
 #: A level (median) beyond the training levels by this many times their range plus
 #: typical RMS is far outside training.
 LEVEL_MARGIN = 10.0
@@ -89,30 +85,17 @@ def _longest_run(c: np.ndarray) -> int:
 
 
 def descriptors(windows) -> np.ndarray:
-    """The spectral-shape numbers of each window, shape ``(n, channels × (2 + N_BANDS))``:
-    per channel log10 RMS, log10 spectral flatness and log10 power share of each of
-    :data:`N_BANDS` equal bands up to Nyquist (the mean removed, a Hann taper applied)."""
+    """log10 RMS and log10 spectral flatness of each window, shape ``(n, channels × 2)``
+    (per channel, in that order; the mean removed, a Hann taper applied)."""
     w = np.asarray(windows, dtype=float)
     if w.ndim == 2:
         w = w[:, None, :]
     d = w - w.mean(axis=-1, keepdims=True)
-    rms = np.sqrt(np.mean(d**2, axis=-1))
-    p = np.abs(np.fft.rfft(d * np.hanning(w.shape[-1]), axis=-1))[..., 1:] ** 2
     tiny = np.finfo(float).tiny
-    p = p + tiny
+    rms = np.sqrt(np.mean(d**2, axis=-1))
+    p = np.abs(np.fft.rfft(d * np.hanning(w.shape[-1]), axis=-1))[..., 1:] ** 2 + tiny
     flat = np.exp(np.mean(np.log(p), axis=-1)) / np.mean(p, axis=-1)
-    edges = _band_edges(p.shape[-1])
-    total = p.sum(axis=-1)
-    share = np.stack([p[..., a:b].sum(axis=-1) / total for a, b in edges], axis=-1)
-    out = np.concatenate([np.log10(rms + tiny)[..., None], np.log10(flat)[..., None],
-                          np.log10(share + 1e-12)], axis=-1)  # fmt: skip
-    return out.reshape(len(w), -1)
-
-
-def _band_edges(n_bins: int) -> list[tuple[int, int]]:
-    """Bin ranges of :data:`N_BANDS` equal bands (DC excluded; at least one bin each)."""
-    tops = np.linspace(0, n_bins, N_BANDS + 1).round().astype(int)
-    return [(min(a, n_bins - 1), max(b, a + 1)) for a, b in itertools.pairwise(tops)]
+    return np.stack([np.log10(rms + tiny), np.log10(flat)], axis=-1).reshape(len(w), -1)
 
 
 @dataclass(frozen=True)
@@ -120,115 +103,83 @@ class HealthReference:
     """What the training windows looked like, for the ``unknown`` check.
 
     Attributes:
-        centres: Each class's mean descriptors, shape ``(classes, d)``.
-        precision: Inverse of the within-class covariance of the descriptors (shrunk
-            towards its diagonal so that it inverts), shape ``(d, d)``.
-        threshold: Score above which a window is ``unknown``.
         level: Lowest and highest training window median, per channel, shape
             ``(channels, 2)``.
-        rms: Median training window RMS per channel, shape ``(channels,)``.
-        train_rejection: Share of the training windows the threshold rejects.
+        log_rms: Lowest and highest log10 RMS of a training window, per channel, shape
+            ``(channels, 2)``.
         noise_flatness: log10 spectral flatness at or above which a window is
             noise-like (:func:`white_flatness`); None when the training windows were
             themselves noise-like too often (:data:`NOISE_TRAIN_LIMIT`).
+        train_rejection: Share of the training windows these checks reject.
     """
 
-    centres: np.ndarray
-    precision: np.ndarray
-    threshold: float
     level: np.ndarray
-    rms: np.ndarray
-    train_rejection: float = 0.0
+    log_rms: np.ndarray
     noise_flatness: float | None = None
+    train_rejection: float = 0.0
 
     @classmethod
-    def fit(cls, windows, labels) -> "HealthReference":
-        """The reference of training windows ``(n, [channels,] window)`` and their class
-        indices ``(n,)``. Sensor-fault windows among them are left out."""
+    def fit(cls, windows, labels=None) -> "HealthReference":
+        """The reference of training windows ``(n, [channels,] window)``; sensor-fault
+        windows among them are left out. ``labels`` is accepted for symmetry and unused."""
         w = np.asarray(windows, dtype=float)
-        labels = np.asarray(labels)
-        ok = np.array([sensor_fault(x) is None for x in w])
-        w, labels = w[ok], labels[ok]
-        d = descriptors(w)
-        classes = np.unique(labels)
-        centres = np.stack([d[labels == c].mean(axis=0) for c in classes])
-        resid = d - centres[np.searchsorted(classes, labels)]
-        cov = resid.T @ resid / max(len(d) - len(classes), 1)
-        # Shrunk towards the diagonal (a fifth) plus a floor: a descriptor that barely
-        # varies in training (one speed, one gain) must not make every new window unknown.
-        diag = np.diag(np.diag(cov)) + 1e-4 * np.eye(len(cov))
-        precision = np.linalg.inv(0.8 * cov + 0.2 * diag + 1e-4 * np.eye(len(cov)))
+        w = w[np.array([sensor_fault(x) is None for x in w])]
         chans = w if w.ndim == 3 else w[:, None, :]
+        d = descriptors(w).reshape(len(w), chans.shape[1], 2)
         level = np.median(chans, axis=-1)
-        ref = cls(centres, precision, 0.0, np.stack([level.min(0), level.max(0)], axis=1),
-                  np.median(np.std(chans, axis=-1), axis=0))  # fmt: skip
-        scores = ref.scores(w)
-        threshold = THRESHOLD_MARGIN * float(np.quantile(scores, TRAIN_QUANTILE))
         noise = white_flatness(w.shape[-1])
-        noisy = np.all(d[:, 1 :: 2 + N_BANDS] >= noise, axis=1)
-        noise = noise if np.mean(noisy) <= NOISE_TRAIN_LIMIT else None
-        rejected = float(np.mean((scores > threshold) | (noisy if noise is not None else False)))
-        return cls(ref.centres, ref.precision, threshold, ref.level, ref.rms, rejected, noise)
-
-    def scores(self, windows) -> np.ndarray:
-        """Each window's distance to the nearest class (see the module docstring)."""
-        d = descriptors(windows)
-        diff = d[:, None, :] - self.centres[None]
-        m = np.einsum("nci,ij,ncj->nc", diff, self.precision, diff)
-        return np.sqrt(np.maximum(m.min(axis=1), 0.0))
+        noisy = np.all(d[..., 1] >= noise, axis=1)
+        ref = cls(np.stack([level.min(0), level.max(0)], axis=1),
+                  np.stack([d[..., 0].min(0), d[..., 0].max(0)], axis=1),
+                  noise if np.mean(noisy) <= NOISE_TRAIN_LIMIT else None)  # fmt: skip
+        rejected = np.mean([ref.out_of_range(x) is not None for x in w])
+        return replace(ref, train_rejection=float(rejected))
 
     def out_of_range(self, x) -> str | None:
         """Why a window lies outside what the model was trained on, or None."""
         chans = _channels(x)
-        for k, c in enumerate(chans):
-            lo, hi = self.level[k]
-            margin = LEVEL_MARGIN * ((hi - lo) + self.rms[k])
-            med = float(np.median(c))
-            if not lo - margin <= med <= hi + margin:
-                return (f"level {med:.4g} far outside training's {lo:.4g}..{hi:.4g} "
-                        "(another sensor, gain or unit?)")  # fmt: skip
-        d = descriptors(chans[None] if chans.shape[0] > 1 else chans)[0]
-        flat = d[1 :: 2 + N_BANDS]
+        d = descriptors(chans[None])[0].reshape(len(chans), 2)
+        flat = d[:, 1]
         if self.noise_flatness is not None and np.all(flat >= self.noise_flatness):
             return (f"noise-like: spectral flatness {10 ** flat.min():.2f}, as flat as white "
                     f"noise's (>= {10**self.noise_flatness:.2f}; the training windows' "
                     "resonances stay below): a dead sensor's electrical noise, or no whisker "
                     "signal")  # fmt: skip
-        score = float(self.scores(chans[None] if chans.shape[0] > 1 else chans)[0])
-        if score > self.threshold:
-            return (
-                f"unlike the training data: spectral shape and amplitude score "
-                f"{score:.3g} > {self.threshold:.3g} (noise-like or not the whisker?)"
-            )
+        for k, c in enumerate(chans):
+            where = "" if len(chans) == 1 else f"channel {k}: "
+            lo, hi = self.level[k]
+            rms_lo, rms_hi = 10.0 ** self.log_rms[k]
+            margin = LEVEL_MARGIN * ((hi - lo) + rms_hi)
+            med = float(np.median(c))
+            if not lo - margin <= med <= hi + margin:
+                return (f"{where}level {med:.4g} far outside training's {lo:.4g}..{hi:.4g} "
+                        "(another sensor, gain or unit?)")  # fmt: skip
+            rms = 10.0 ** d[k, 0]
+            if not rms_lo / RMS_MARGIN <= rms <= rms_hi * RMS_MARGIN:
+                return (f"{where}amplitude {rms:.3g} RMS, more than {RMS_MARGIN:g}x outside "
+                        f"training's {rms_lo:.3g}..{rms_hi:.3g} (another sensor, gain or "
+                        "unit?)")  # fmt: skip
         return None
 
     def to_dict(self) -> dict:
         """JSON-ready form (for the model header)."""
         return {
-            "descriptors": "per channel: log10 rms, log10 spectral flatness, log10 power "
-                           f"share of {N_BANDS} equal bands up to Nyquist",
-            "centres": self.centres.tolist(),
-            "precision": self.precision.tolist(),
-            "threshold": self.threshold,
             "level": self.level.tolist(),
-            "rms": self.rms.tolist(),
-            "train_rejection": self.train_rejection,
+            "log_rms": self.log_rms.tolist(),
             "noise_flatness": self.noise_flatness,
-        }  # fmt: skip
+            "train_rejection": self.train_rejection,
+        }
 
     @classmethod
     def from_dict(cls, d: dict) -> "HealthReference":
         """Read :meth:`to_dict`'s form; raises ValueError/KeyError/TypeError when corrupt."""
         noise = d.get("noise_flatness")
-        ref = cls(np.asarray(d["centres"], float), np.asarray(d["precision"], float),
-                  float(d["threshold"]), np.asarray(d["level"], float),
-                  np.asarray(d["rms"], float), float(d.get("train_rejection", 0.0)),
-                  None if noise is None else float(noise))  # fmt: skip
-        n = ref.centres.shape[-1]
-        if ref.centres.ndim != 2 or ref.precision.shape != (n, n) or ref.level.ndim != 2:
+        ref = cls(np.asarray(d["level"], float), np.asarray(d["log_rms"], float),
+                  None if noise is None else float(noise),
+                  float(d.get("train_rejection", 0.0)))  # fmt: skip
+        if ref.level.ndim != 2 or ref.level.shape != ref.log_rms.shape or ref.level.shape[1] != 2:
             raise ValueError("inconsistent health reference shapes")
-        arrays = (ref.centres, ref.precision, ref.level, ref.rms)
-        if not (all(np.isfinite(a).all() for a in arrays) and ref.threshold > 0):
+        if not (np.isfinite(ref.level).all() and np.isfinite(ref.log_rms).all()):
             raise ValueError("non-finite health reference")
         return ref
 

@@ -147,8 +147,9 @@ def _cmd_posterior(args, command_error, parser) -> dict:
     for name in ("f1_hz", "zeta", "kappa", "EI", "C"):
         if name in post.params:
             q = post.params[name]
-            print(f"{name} = {interval_text(q)}, tau {q['tau']:.3g}, ESS {q['ess']:.4g}",
-                  file=sys.stderr)  # fmt: skip
+            tau, ess = (f"{q[k]:.3g}" if math.isfinite(q[k]) else "unknown (too few steps)"
+                        for k in ("tau", "ess"))  # fmt: skip
+            print(f"{name} = {interval_text(q)}, tau {tau}, ESS {ess}", file=sys.stderr)
     print(f"acceptance {d['acceptance']:.3f}; {d['message']}", file=sys.stderr)
     out = {**post.to_json(), "out": str(out_toml), "chain": str(chain), "options": used}
     if not args.no_plots:

@@ -148,6 +148,24 @@ def _check_keys(table: dict, known, where: str) -> None:
         )
 
 
+def _check_finite(value, where: str) -> None:
+    """Refuse a NaN or infinite number anywhere in the record, later stages' tables
+    included: it would be copied into every record made from this one. An uncertainty
+    (``std``) may be NaN: a fit whose covariance could not be estimated says so that way."""
+    if isinstance(value, dict):
+        for k, v in value.items():
+            if k != "std":
+                _check_finite(v, f"{where}.{k}" if where else str(k))
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            _check_finite(v, f"{where}[{i}]")
+    elif isinstance(value, float) and not math.isfinite(value):
+        raise RecordError(
+            f"{where} = {value} is not a number: mend the record, or make it again "
+            "(whiskerid calibrate)"
+        )
+
+
 def _check_top_level(data: dict) -> None:
     """Top-level scalars must be known ones; tables other stages add (``[fit]``,
     ``[posterior]``, ``[planes]``) are kept, unless the name is a near-miss of a known one
@@ -186,6 +204,7 @@ def record_from_dict(data: dict[str, Any]) -> WhiskerRecord:
     if schema != SCHEMA:
         raise RecordError(f"schema = {schema!r} is not supported (expected {SCHEMA!r})")
     _check_top_level(data)
+    _check_finite(data, "")
     structure = _structure(_table(data, "structure"))
     damping = _table(data, "damping")
     _check_keys(damping, _DAMPING, "damping.")
