@@ -72,7 +72,8 @@ def test_a_posterior_too_short_for_tau_writes_no_nan(tmp_path):
 
     q = {"median": 1.0, "tau": float("nan"), "ess": float("nan")}
     post = Posterior(params={"f1_hz": q}, diagnostics={"converged": False, "message": "m",
-                     "max_tau": float("nan")}, correlations={"names": ["f1_hz"],
+                     "max_tau": float("nan"), "tau": {"f1_hz": float("nan")},
+                     "acceptance": 0.5}, correlations={"names": ["f1_hz"],
                      "matrix": [[float("nan")]]}, samples=np.zeros((2, 1)), names=["f1_hz"],
                      chain=np.zeros((1, 2, 1)))  # fmt: skip
     rec = _updated_record(paper_record(), post)
