@@ -149,7 +149,7 @@ def _check_keys(table: dict, known, where: str) -> None:
 
 
 def _check_finite(value, where: str) -> None:
-    """Refuse a NaN or infinite number anywhere in the record, later stages' tables
+    """Refuse a NaN or infinite number in the tables later stages add (the record's own
     included: it would be copied into every record made from this one. An uncertainty
     (``std``) may be NaN: a fit whose covariance could not be estimated says so that way."""
     if isinstance(value, dict):
@@ -204,7 +204,7 @@ def record_from_dict(data: dict[str, Any]) -> WhiskerRecord:
     if schema != SCHEMA:
         raise RecordError(f"schema = {schema!r} is not supported (expected {SCHEMA!r})")
     _check_top_level(data)
-    _check_finite(data, "")
+    _check_finite({k: v for k, v in data.items() if k not in _KNOWN}, "")  # own ranges below
     structure = _structure(_table(data, "structure"))
     damping = _table(data, "damping")
     _check_keys(damping, _DAMPING, "damping.")
