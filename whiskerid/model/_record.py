@@ -150,7 +150,8 @@ def _check_keys(table: dict, known, where: str) -> None:
 
 def _check_finite(value, where: str) -> None:
     """Refuse a NaN or infinite number in the tables later stages add (the record's own
-    included: it would be copied into every record made from this one. An uncertainty
+    values have their ranges checked): it would be copied into every record made from
+    this one. An uncertainty
     (``std``) may be NaN: a fit whose covariance could not be estimated says so that way."""
     if isinstance(value, dict):
         for k, v in value.items():
