@@ -110,3 +110,26 @@ def test_a_second_signal_never_reaches_a_command_that_is_stopping():
     assert policy._handle(signal.SIGTERM, None) is None
     assert policy._handle(signal.SIGINT, None) is None
     assert policy.status(Interrupted(signal.SIGTERM)) == 143
+
+
+def test_the_chain_stops_whole_before_the_disk_is_full(tmp_path, monkeypatch):
+    """HDF5 crashed the process when a step's write failed on a full disk (the chain left
+    torn): a step is not begun short of CHAIN_FREE_BYTES, and what was written stays
+    readable for --resume."""
+    import emcee
+
+    from whiskerid.posterior import _sample
+
+    path = tmp_path / "chain.h5"
+    be = _sample._checked_backend(emcee)(str(path), name="whiskerid")
+    be.reset(4, 2)
+    be.grow(2, None)
+    state = emcee.State(np.ones((4, 2)), log_prob=np.zeros(4),
+                        random_state=np.random.RandomState(0).get_state())  # fmt: skip
+    be.save_step(state, np.ones(4, bool))
+    monkeypatch.setattr(_sample, "CHAIN_FREE_BYTES", 1 << 62)  # no disk has that much
+    with pytest.raises(OSError, match="stopped before writing step 2") as err:
+        be.save_step(state, np.ones(4, bool))
+    assert err.value.errno == errno.ENOSPC
+    again = emcee.backends.HDFBackend(str(path), name="whiskerid", read_only=True)
+    assert again.iteration == 1 and again.get_chain().shape == (1, 4, 2)
