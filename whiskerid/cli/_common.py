@@ -272,7 +272,7 @@ class InterruptPolicy:
     def __init__(self) -> None:
         self.signum: int | None = None
         self.requested = False
-        self.raised = False
+        self.stopping = False  # set once the command has caught its interrupt
         self._defer = False
         self._previous: dict = {}
 
@@ -293,10 +293,10 @@ class InterruptPolicy:
         self._previous = {}
 
     def _handle(self, signum, frame) -> None:
-        if self.raised:
-            # The command is already stopping: cleaning up, saying what it kept, tearing
-            # down. A second signal raised there would cut the cleanup short (a torn file)
-            # or land in native code being torn down (a crash), so it is ignored.
+        if self.stopping:
+            # The command has stopped: it is saying what it kept and tearing down. A signal
+            # raised there would land in native code being torn down (a crash), so it is
+            # ignored.
             return
         first = self.signum is None
         self.signum = signum
@@ -304,7 +304,6 @@ class InterruptPolicy:
             self.requested = True
             say("stopping after the current step (send the signal again to stop at once)")
             return
-        self.raised = True
         raise Interrupted(signum)
 
     def stop_requested(self) -> bool:

@@ -121,6 +121,7 @@ def _run(args, start: float) -> int:
             print(f"whiskerid {args.command}: error: {one_line(err)}", file=sys.stderr)
             return 2
         except KeyboardInterrupt as err:
+            policy.stopping = True  # from here on a signal would land in the teardown
             # One line, no traceback: what was kept, or that nothing was written.
             print(f"whiskerid {args.command}: {policy.report(err)}", file=sys.stderr)
             return policy.status(err)
