@@ -68,7 +68,7 @@ class WindowLabel:
 #: few samples; ``model-fault``: the model's output is not a probability; ``stopped``: the
 #: robot is not moving, so there is no terrain vibration to read.
 SENSOR_FAULT, NO_DATA, MODEL_FAULT, STOPPED = "sensor-fault", "no-data", "model-fault", "stopped"
-FAULT_LABELS = (SENSOR_FAULT, NO_DATA, MODEL_FAULT, STOPPED)
+FAULT_LABELS = (SENSOR_FAULT, NO_DATA, MODEL_FAULT, STOPPED, "unknown")  # unknown: not the whisker
 
 #: A live speed not updated for longer than this (s) is reported as the last known one.
 SPEED_STALE_S = 2.0
@@ -303,6 +303,9 @@ class OnlineClassifier:
         window gets its fault label without the model."""
         if pending.fault is not None:
             return self._fault(pending, *pending.fault)
+        health = getattr(self.model, "window_health", None)  # no terrain for a non-whisker
+        if health is not None and (why := health(pending.samples)) is not None:
+            return self._fault(pending, *why)
         p = np.asarray(self.model.window_proba(pending.samples, pending.speed_mps))
         if not (np.all(np.isfinite(p)) and np.all(p >= 0) and abs(float(np.sum(p)) - 1) < 1e-3):
             return self._fault(pending, MODEL_FAULT, "the model's output is not a probability "

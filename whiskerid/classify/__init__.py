@@ -36,6 +36,8 @@ from ._features import band_energies as band_energies
 from ._features import base_band_levels as base_band_levels
 from ._features import compute_features as compute_features
 from ._features import spectral_peaks as spectral_peaks
+from ._health import HealthReference as HealthReference
+from ._health import window_health as window_health
 from ._mlp import TrainConfig as TrainConfig
 from ._mlp import default_config as default_config
 from ._model_file import ClassifierModel as ClassifierModel

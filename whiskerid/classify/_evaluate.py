@@ -162,7 +162,7 @@ def recording_scores(proba: np.ndarray, labels: np.ndarray, ws: WindowSet,
 def format_confusion(conf, labels) -> str:
     """The confusion matrix as a text table (rows: true class; columns: predicted)."""
     conf = np.asarray(conf)
-    short = [lab[:9] for lab in labels]
+    short = [str(lab) for lab in labels]  # whole: "soft-grass" cut to 9 read "soft-gras"
     width = max(9, max(len(s) for s in short))
     lines = ["true \\ pred".ljust(width + 2) + " ".join(s.rjust(width) for s in short) + "  acc"]
     for i, lab in enumerate(short):

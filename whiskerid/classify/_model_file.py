@@ -48,6 +48,7 @@ from ._features import (
     window_features,
     window_fit_features,
 )
+from ._health import HealthReference, window_health
 from ._mlp import (
     MLP,
     from_arrays,
@@ -106,8 +107,10 @@ class ClassifierModel:
     def __init__(self, spec: FeatureSpec, labels, mean, std, net: "MLP | list[MLP]", *,
                  hop: int, channel: str | None = None, info: dict | None = None,
                  context_s: float | None = None,
-                 whisker: WhiskerResponse | None = None):  # fmt: skip
+                 whisker: WhiskerResponse | None = None,
+                 health: HealthReference | None = None):  # fmt: skip
         self.spec = spec
+        self.health = health
         self.labels = tuple(labels)
         self.mean = np.asarray(mean, dtype=np.float32)
         self.std = np.asarray(std, dtype=np.float32)
@@ -127,6 +130,18 @@ class ClassifierModel:
         self._args = (spec.numbers(whisker), self.nets, jnp.asarray(self.mean),
                       jnp.asarray(self.std))  # fmt: skip
         self._exported = None  # window_proba from a saved program (see use_saved_program)
+
+    def window_health(self, samples) -> tuple[str, str] | None:
+        """``(label, reason)`` when a window must get no terrain (``sensor-fault``: no
+        working sensor gives it; ``unknown``: unlike every training window), else None
+        (:func:`whiskerid.classify.window_health`).
+
+        The training data's reference applies while the model reads its own whisker's
+        recordings; on another whisker (:meth:`use_whisker`) whose resonance shapes the
+        spectrum differently, only the sensor-fault checks do.
+        """
+        own = self.recorded_with is self.whisker
+        return window_health(samples, self.health if own else None)
 
     @property
     def needs_whisker(self) -> bool:
@@ -353,23 +368,28 @@ class ClassifierModel:
                     f"{rec.source}: the model needs the robot speed; add '# speed_mps: V' "
                     "to the recording or pass --speed"
                 )
-        p = self.predict_proba(w, None if speed is None else np.full(len(w), speed))
-        fused = self.fuse(p, np.zeros(len(w), int), starts)
+        # A window that is not the whisker gets no terrain, and no label fuses across it.
+        faults = [self.window_health(x) for x in w]
+        good = np.array([f is None for f in faults])
+        p = self.predict_proba(w[good], None if speed is None else np.full(good.sum(), speed))
+        fused = self.fuse(p, np.cumsum(~good)[good], starts[good])
         own, idx = np.argmax(p, axis=1), np.argmax(fused, axis=1)
-        mean = p.mean(axis=0)
-        return {
-            "label": self.labels[int(np.argmax(mean))],
-            "confidence": float(mean.max()),
-            "channel": used,
-            "context_s": self.context_s,
-            "windows": [
-                {"start_s": round(float(starts[i]), 6), "label": self.labels[k],
-                 "confidence": round(float(fused[i, k]), 4),
-                 "window_label": self.labels[own[i]],
-                 "window_confidence": round(float(p[i, own[i]]), 4)}
-                for i, k in enumerate(idx)
-            ],
-        }  # fmt: skip
+        windows, j = [], 0
+        for i, fault in enumerate(faults):
+            start = round(float(starts[i]), 6)
+            if fault is not None:
+                windows.append({"start_s": start, "label": fault[0], "confidence": 0.0,
+                                "window_label": fault[0], "window_confidence": 0.0,
+                                "reason": fault[1]})  # fmt: skip
+                continue
+            k = idx[j]
+            windows.append({"start_s": start, "label": self.labels[k],
+                            "confidence": round(float(fused[j, k]), 4),
+                            "window_label": self.labels[own[j]],
+                            "window_confidence": round(float(p[j, own[j]]), 4)})  # fmt: skip
+            j += 1
+        return {**_overall(self.labels, p, faults), "channel": used, "context_s": self.context_s,
+                "fault_windows": int((~good).sum()), "windows": windows}  # fmt: skip
 
     # ----------------------------------------------------------------------- files
     def header(self) -> dict:
@@ -393,6 +413,7 @@ class ClassifierModel:
                         "output": "softmax", "members": len(self.nets),
                         "combine": "mean of the members' probabilities"},
             "training": self.info,
+            **({"health": self.health.to_dict()} if self.health is not None else {}),
         }  # fmt: skip
 
     def save(self, path: str | Path) -> Path:
@@ -472,10 +493,16 @@ class ClassifierModel:
                 whisker = WhiskerResponse.from_dict(head["whisker"], spec.channels)
             except (KeyError, TypeError, ValueError) as err:
                 raise ModelError(f"{head_file}: corrupt whisker in the header ({err})") from None
+        health = None
+        if "health" in head:
+            try:
+                health = HealthReference.from_dict(head["health"])
+            except (KeyError, TypeError, ValueError) as err:
+                raise ModelError(f"{head_file}: corrupt health reference ({err})") from None
         try:
             return cls(spec, labels, mean, std, nets, hop=hop, channel=head.get("channel"),
                        info=head.get("training", {}), context_s=context_s,
-                       whisker=whisker)  # fmt: skip
+                       whisker=whisker, health=health)  # fmt: skip
         except ValueError as err:
             raise ModelError(f"{head_file}: corrupt model header ({err})") from None
 
@@ -510,6 +537,18 @@ def _check_weights(path: Path, arrays: dict) -> None:
                 f"{path}: weights {name} reach {np.max(np.abs(a)):.3g} (a trained network's "
                 f"stay below {MAX_WEIGHT:g}): the file is corrupt; retrain with 'whiskerid train'"
             )
+
+
+def _overall(labels, p: np.ndarray, faults: list) -> dict:
+    """The whole recording's label: the mean probability of the windows fit to classify;
+    when none is, the commonest fault, with its first reason."""
+    if len(p):
+        mean = p.mean(axis=0)
+        return {"label": labels[int(np.argmax(mean))], "confidence": float(mean.max())}
+    kinds = [f[0] for f in faults]
+    label = max(set(kinds), key=kinds.count)
+    return {"label": label, "confidence": 0.0,
+            "reason": next(f[1] for f in faults if f[0] == label)}  # fmt: skip
 
 
 #: No host-computed features: one device-resident empty row, reused by every call.

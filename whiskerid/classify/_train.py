@@ -8,6 +8,7 @@ import numpy as np
 from ._context import check_context, default_context_s
 from ._dataset import WindowSet
 from ._features import FeatureSpec, compute_features, rerecorded
+from ._health import HealthReference
 from ._mlp import TrainConfig, default_config, train_mlp
 from ._model_file import ClassifierModel, recording_hashes
 from ._split import grouped_split
@@ -240,6 +241,9 @@ def train_classifier(
     model = fit_on_features(feats, train_ws, spec, config, context_s=context_s,
                             whisker=whisker)  # fmt: skip
     model.info["span_whiskers"] = count
+    # What the training windows look like, so that a window unlike them all (a dead
+    # sensor's noise, another instrument) is 'unknown' rather than some terrain.
+    model.health = HealthReference.fit(ws.windows, ws.labels)
     model.info["recordings_sha256"] = recording_hashes(ws.sources)
     model.channel = ws.channel if channel is None else channel
     if hop is not None:

@@ -93,14 +93,19 @@ def run(args) -> dict:
             f"only signal column is {res['channel']!r}, classified instead")  # fmt: skip
     say(f"{args.recording}: {res['label']} (confidence {res['confidence']:.3f}, "
         f"{len(res['windows'])} windows)")  # fmt: skip
+    if res["fault_windows"]:
+        first = next(w for w in res["windows"] if "reason" in w)
+        say(f"warning: {res['fault_windows']} window(s) got no terrain, e.g. at "
+            f"{first['start_s']:g} s: {first['label']} ({first['reason']})")  # fmt: skip
     out = {"recording": str(args.recording), **res}
     if args.plot is not None:
         from ..plot import plot_recording_labels
 
         x = rec.columns[res["channel"].split(",")[0]]  # checked by classify_recording
         title = f"{args.recording.name}: {res['label']} (mean probability {res['confidence']:.2f})"
-        plot_recording_labels(args.plot, rec.t, x, res, model.labels, window_s=model.window_s,
-                              title=title)  # fmt: skip
+        faults = sorted({w["label"] for w in res["windows"]} - set(model.labels))
+        plot_recording_labels(args.plot, rec.t, x, res, [*model.labels, *faults],
+                              window_s=model.window_s, title=title)  # fmt: skip
         out["plot"] = str(args.plot)
         say(f"wrote {args.plot}")
     return out

@@ -202,6 +202,10 @@ def check_outputs(
             raise CommandError(f"{flag} and {seen[key]} are the same path {out}; give two")
         seen[key] = flag
         _check_one(flag, out, is_folder=flag in folders, force=force, hint=exists_hint)
+        if not force and not (out.exists() or out.is_symlink()):
+            from ..io import expect_new
+
+            expect_new(out)  # published only if still absent: no check-then-write race
         if min_free_bytes:
             _check_space(flag, out, min_free_bytes)
     WATCH.outputs.extend(given.values())
@@ -218,6 +222,15 @@ def _check_one(flag: str, out: Path, *, is_folder: bool, force: bool, hint: str)
     else:
         if out.is_dir():
             raise CommandError(f"{flag} {out} is a folder; give a file name")
+        if out.exists() and not out.is_file():  # even with --force: not ours to replace
+            raise CommandError(
+                f"{flag} {out} is not a regular file (a device, pipe or socket); give a file name"
+            )
+        if out.is_symlink() and not out.exists() and not force:
+            raise CommandError(
+                f"{flag} {out} is a link to {os.readlink(out)}, which does not exist; "
+                f"{hint} (the link is replaced, not its target)"
+            )
         if out.exists() and not force:
             raise CommandError(f"{flag} {out} already exists; {hint}")
     parent = next((p for p in [out, *out.parents] if p.exists()), Path("."))
@@ -259,6 +272,7 @@ class InterruptPolicy:
     def __init__(self) -> None:
         self.signum: int | None = None
         self.requested = False
+        self.stopping = False  # set once the command has caught its interrupt
         self._defer = False
         self._previous: dict = {}
 
@@ -279,6 +293,11 @@ class InterruptPolicy:
         self._previous = {}
 
     def _handle(self, signum, frame) -> None:
+        if self.stopping:
+            # The command has stopped: it is saying what it kept and tearing down. A signal
+            # raised there would land in native code being torn down (a crash), so it is
+            # ignored.
+            return
         first = self.signum is None
         self.signum = signum
         if self._defer and first:
@@ -332,7 +351,10 @@ _POLICY = InterruptPolicy()
 def start_command() -> InterruptPolicy:
     """A fresh interrupt policy and output watch for a command about to run."""
     global _POLICY
+    from ..io import clear_expected
+
     WATCH.reset()
+    clear_expected()
     _POLICY = InterruptPolicy()
     return _POLICY
 

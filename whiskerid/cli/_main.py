@@ -11,6 +11,8 @@ answers without starting JAX: the run functions import what they use.
 
 import argparse
 import json
+import os
+import signal
 import sys
 import time
 import zipfile
@@ -96,6 +98,22 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     enable_compile_cache()
     start = time.perf_counter()
+    try:
+        return _run(args, start)
+    except BrokenPipeError:
+        # The reader left (``| head``): what it read is all it wanted. No traceback, and
+        # nothing more written to the closed pipe at exit.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                os.dup2(devnull, stream.fileno())
+            except (OSError, ValueError):
+                pass
+        return 128 + signal.SIGPIPE
+
+
+def _run(args, start: float) -> int:
+    """Run the parsed command; its exit status."""
     with start_command() as policy:
         try:
             result = args.func(args)
@@ -103,6 +121,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"whiskerid {args.command}: error: {one_line(err)}", file=sys.stderr)
             return 2
         except KeyboardInterrupt as err:
+            policy.stopping = True  # from here on a signal would land in the teardown
             # One line, no traceback: what was kept, or that nothing was written.
             print(f"whiskerid {args.command}: {policy.report(err)}", file=sys.stderr)
             return policy.status(err)
@@ -113,6 +132,7 @@ def main(argv: list[str] | None = None) -> int:
                 "elapsed_s": round(time.perf_counter() - start, 3),
             }
             print(json.dumps(json_safe(result), indent=2, allow_nan=False))
+            sys.stdout.flush()  # here, not at exit: a closed pipe is reported in main
     return 0
 
 

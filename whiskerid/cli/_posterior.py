@@ -144,15 +144,22 @@ def _cmd_posterior(args, command_error, parser) -> dict:
                 stop=policy.stop_requested,
             )
     except OSError as err:
+        _drop_empty_chain(chain, args.resume)
         raise command_error(f"could not write the chain {chain}: {one_line(err)}") from None
+    except BaseException:
+        # Refused (bad settings for this record) or stopped before any step: a chain with
+        # no samples would only block the corrected run ("already exists").
+        _drop_empty_chain(chain, args.resume)
+        raise
     WATCH.notes.clear()
     out_toml = post.record.save(args.out / "posterior.toml")
     d = post.diagnostics
     for name in ("f1_hz", "zeta", "kappa", "EI", "C"):
         if name in post.params:
             q = post.params[name]
-            print(f"{name} = {interval_text(q)}, tau {q['tau']:.3g}, ESS {q['ess']:.4g}",
-                  file=sys.stderr)  # fmt: skip
+            tau, ess = (f"{q[k]:.3g}" if math.isfinite(q[k]) else "unknown (too few steps)"
+                        for k in ("tau", "ess"))  # fmt: skip
+            print(f"{name} = {interval_text(q)}, tau {tau}, ESS {ess}", file=sys.stderr)
     print(f"acceptance {d['acceptance']:.3f}; {d['message']}", file=sys.stderr)
     out = {**post.to_json(), "out": str(out_toml), "chain": str(chain), "options": used}
     if not args.no_plots:
@@ -277,14 +284,27 @@ def _diff(old, new) -> str:
     )
 
 
-def _chain_note(chain: Path) -> str | None:
-    """What an interrupted run kept: the chain, resumable."""
+def _chain_steps(chain: Path) -> int | None:
+    """Finished steps in a chain file (None: no readable chain)."""
     try:
         import h5py
 
         with h5py.File(chain, "r") as f:
-            steps = int(f["whiskerid"].attrs["iteration"])
+            return int(f["whiskerid"].attrs["iteration"]) if "whiskerid" in f else 0
     except (OSError, KeyError, ImportError):
+        return None
+
+
+def _drop_empty_chain(chain: Path, resumed: bool) -> None:
+    """Remove a chain this run started that holds no step."""
+    if not resumed and chain.exists() and not _chain_steps(chain):
+        chain.unlink(missing_ok=True)
+
+
+def _chain_note(chain: Path) -> str | None:
+    """What an interrupted run kept: the chain, resumable."""
+    steps = _chain_steps(chain)
+    if steps is None:
         return None
     if steps == 0:
         return f"no step was finished; {chain} holds no samples"

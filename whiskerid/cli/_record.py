@@ -58,7 +58,7 @@ def add_parser(sub) -> None:
     p.add_argument(
         "--address",
         type=lambda s: int(s, 0),
-        default=0x48,
+        default="0x48",  # converted by type; --help shows it as written, not as 72
         help="I2C address of the chip (ADDR pin: GND 0x48, VDD 0x49, SDA 0x4A, SCL 0x4B)",
     )
     p.add_argument("--fsr", type=float, default=4.096, help="PGA full-scale range (V)")

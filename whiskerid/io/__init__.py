@@ -12,6 +12,8 @@ from ._atomic import WriteError as WriteError
 from ._atomic import atomic_folder as atomic_folder
 from ._atomic import atomic_path as atomic_path
 from ._atomic import atomic_write as atomic_write
+from ._atomic import clear_expected as clear_expected
+from ._atomic import expect_new as expect_new
 from ._atomic import fsync_folder as fsync_folder
 from ._rate import RATE_METADATA_TOLERANCE as RATE_METADATA_TOLERANCE
 from ._rate import recording_rate as recording_rate

@@ -7,6 +7,7 @@ a file cut mid-line. No JAX here: the Raspberry Pi side writes through this modu
 """
 
 import contextlib
+import errno
 import os
 import shutil
 import tempfile
@@ -20,10 +21,8 @@ class WriteError(OSError):
 
 def _write_error(path: Path, err: OSError) -> WriteError:
     reason = err.strerror or str(err) or type(err).__name__
-    new = WriteError(
-        f"could not write {path}: {reason}; nothing was replaced (free some space or "
-        "choose another place)"
-    )
+    hint = "" if err.errno == errno.EEXIST else " (free some space or choose another place)"
+    new = WriteError(f"could not write {path}: {reason}; nothing was replaced{hint}")
     new.errno = err.errno
     return new
 
@@ -40,6 +39,42 @@ def fsync_folder(folder: Path) -> None:
         pass
     finally:
         os.close(fd)
+
+
+#: Outputs that must not exist when published (resolved paths): a command refused them if
+#: they existed, so one that appears meanwhile (another process) is not overwritten.
+_EXPECTED_NEW: set[Path] = set()
+
+
+def expect_new(path: str | Path) -> None:
+    """Publish ``path`` only if it still does not exist then (:func:`atomic_path`)."""
+    _EXPECTED_NEW.add(Path(path).absolute())
+
+
+def clear_expected() -> None:
+    """Forget :func:`expect_new`'s paths (a new command starts)."""
+    _EXPECTED_NEW.clear()
+
+
+def _publish(tmp: Path, path: Path) -> None:
+    """Rename ``tmp`` over ``path``; for an expected-new path, only if it is still absent,
+    atomically (a hard link fails if the name exists, where a rename would replace it)."""
+    if path.absolute() not in _EXPECTED_NEW:
+        os.replace(tmp, path)
+        return
+    try:
+        os.link(tmp, path)
+    except FileExistsError:
+        raise FileExistsError(
+            errno.EEXIST,
+            "it appeared while this command ran (another process wrote it?); "
+            "run again with --force to replace it",
+        ) from None
+    except OSError:  # no hard links here (some FUSE, FAT): create-exclusive, then rename
+        os.close(os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+        os.replace(tmp, path)
+        return
+    tmp.unlink()
 
 
 @contextlib.contextmanager
@@ -69,7 +104,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
             shutil.copymode(path, tmp)
         else:
             os.chmod(tmp, 0o666 & ~_umask())
-        os.replace(tmp, path)
+        _publish(tmp, path)
     except OSError as err:
         tmp.unlink(missing_ok=True)
         raise _write_error(path, err) from err
@@ -111,6 +146,8 @@ def atomic_folder(path: str | Path) -> Iterator[Path]:
             with open(f, "rb+") as fh:
                 os.fsync(fh.fileno())
         os.chmod(tmp, 0o777 & ~_umask())
+        if path.absolute() in _EXPECTED_NEW and path.exists():
+            raise FileExistsError(errno.EEXIST, "it appeared while this command ran")
         if path.is_dir():
             old = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".old", dir=path.parent))
             os.replace(path, old / path.name)

@@ -374,10 +374,18 @@ def _not_numpy(path: Path, err: Exception) -> RecordingError:
 def _read_npz(path: Path, time_col: str) -> Recording:
     try:
         # Our own file handle: np.load leaks its own when the archive is corrupt.
-        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
-            arrays = {k: np.asarray(z[k]) for k in z.files}
+        with open(path, "rb") as fh:
+            z = np.load(fh, allow_pickle=False)
+            if isinstance(z, np.lib.npyio.NpzFile):
+                with z:
+                    arrays = {k: np.asarray(z[k]) for k in z.files}
     except _NUMPY_LOAD_ERRORS as err:
         raise _not_numpy(path, err) from None
+    if not isinstance(z, np.lib.npyio.NpzFile):  # one array: a .npy file misnamed
+        raise RecordingError(
+            f"{path}: a single NumPy array (a .npy file) named .npz; an .npz archive holds "
+            "named arrays (t and the signals): rename it to .npy"
+        )
     if time_col not in arrays:
         raise RecordingError(f"{path}: no array {time_col!r}; arrays are {list(arrays)}")
     t = _numeric(path, time_col, arrays.pop(time_col)).astype(float)

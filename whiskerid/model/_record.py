@@ -28,6 +28,7 @@ Example (``fits/paper-whisker.toml``)::
     ...
 """
 
+import difflib
 import math
 import tomllib
 from dataclasses import dataclass, field, fields, replace
@@ -130,6 +131,52 @@ class WhiskerRecord:
 
 
 _KNOWN = {"schema", "name", "description", "structure", "damping", "tip_mass_kg", "sensor", "adc"}
+_DAMPING = {"zeta", "n_modes"}
+_SENSOR = {"position_m", "hall_gain_v_per_m", "hall_offset_v", "hall_quadratic_v_per_m2"}
+
+
+def _check_keys(table: dict, known, where: str) -> None:
+    """Refuse a key this record does not know, naming the nearest known one: a misspelt
+    key (``tip_mas_kg``) would otherwise leave its default in place without a word."""
+    unknown = sorted(set(table) - set(known))
+    if unknown:
+        key = unknown[0]
+        near = difflib.get_close_matches(key, sorted(known), n=1, cutoff=0.5)
+        hint = f"; did you mean {near[0]!r}?" if near else ""
+        raise RecordError(
+            f"{where}{key} is not a known key{hint} (known: {', '.join(sorted(known))})"
+        )
+
+
+def _check_finite(value, where: str) -> None:
+    """Refuse a NaN or infinite number in the tables later stages add (the record's own
+    values have their ranges checked): it would be copied into every record made from
+    this one. An uncertainty
+    (``std``) may be NaN: a fit whose covariance could not be estimated says so that way."""
+    if isinstance(value, dict):
+        for k, v in value.items():
+            if k != "std":
+                _check_finite(v, f"{where}.{k}" if where else str(k))
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            _check_finite(v, f"{where}[{i}]")
+    elif isinstance(value, float) and not math.isfinite(value):
+        raise RecordError(
+            f"{where} = {value} is not a number: mend the record, or make it again "
+            "(whiskerid calibrate)"
+        )
+
+
+def _check_top_level(data: dict) -> None:
+    """Top-level scalars must be known ones; tables other stages add (``[fit]``,
+    ``[posterior]``, ``[planes]``) are kept, unless the name is a near-miss of a known one
+    (``[sensr]``)."""
+    scalars = {k: v for k, v in data.items() if not isinstance(v, dict)}
+    _check_keys(scalars, _KNOWN - {"structure", "damping", "sensor", "adc"}, "")
+    for key in set(data) - _KNOWN - set(scalars):
+        near = difflib.get_close_matches(key, sorted(_KNOWN), n=1, cutoff=0.8)
+        if near:
+            raise RecordError(f"[{key}] is not a known table; did you mean [{near[0]}]?")
 
 
 def load_record(path: str | Path) -> WhiskerRecord:
@@ -157,16 +204,27 @@ def record_from_dict(data: dict[str, Any]) -> WhiskerRecord:
     schema = data.get("schema", SCHEMA)
     if schema != SCHEMA:
         raise RecordError(f"schema = {schema!r} is not supported (expected {SCHEMA!r})")
+    _check_top_level(data)
+    _check_finite({k: v for k, v in data.items() if k not in _KNOWN}, "")  # own ranges below
     structure = _structure(_table(data, "structure"))
     damping = _table(data, "damping")
+    _check_keys(damping, _DAMPING, "damping.")
     # Only a Hall sensor needs its [sensor] gain and offset; without the table (an
     # accelerometer, a laser) the signal is read at the tip and the Hall values are unused.
     sensor = data.get("sensor", {"position_m": structure.length_m})
     if not isinstance(sensor, dict):
         raise RecordError("[sensor] must be a table")
+    _check_keys(sensor, _SENSOR, "sensor.")
+    if isinstance(data.get("adc"), dict):
+        _check_keys(data["adc"], {f.name for f in fields(ADS1115Model)}, "adc.")
     zeta = _get(damping, "zeta", "damping")
     zeta = tuple(float(z) for z in zeta) if isinstance(zeta, list) else zeta
     n_modes = len(zeta) if isinstance(zeta, tuple) else damping.get("n_modes", 5)
+    if isinstance(zeta, tuple) and damping.get("n_modes", n_modes) != n_modes:
+        raise RecordError(
+            f"damping.zeta lists {n_modes} modes but damping.n_modes = "
+            f"{damping['n_modes']!r}: give one zeta per mode, or one zeta for all"
+        )
     hall_keys = {
         "hall_gain_v_per_m": "gain_v_per_m",
         "hall_offset_v": "offset_v",
@@ -213,8 +271,10 @@ def _structure(table: dict) -> Structure:
     names = {f.name for f in fields(cls)} - {"kind"}
     unknown = set(table) - names - {"kind"}
     if unknown:
+        near = difflib.get_close_matches(min(unknown), sorted(names), n=1, cutoff=0.5)
+        hint = f" (did you mean {near[0]!r}?)" if near else ""
         raise RecordError(
-            f"structure: unknown field(s) {sorted(unknown)} for kind {kind!r}; "
+            f"structure: unknown field(s) {sorted(unknown)} for kind {kind!r}{hint}; "
             f"known: {sorted(names)}"
         )
     for key, value in table.items():  # before the classes' own checks: say the range

@@ -63,14 +63,17 @@ def _time_panels(ax_all, ax_zoom, t, y, model, f1, info, unit):
 
 def _spectra(ax, t, y, model, modes, unit):
     rate = 1.0
-    for sig, label, color in (
-        (y, "data", "C0"),
-        (model, "fit", "C1"),
-        (y - model, "residuals", "C3"),
+    # Residuals first and faint, the data on top: the data must stay visible where the
+    # residuals are as large (the noise floor).
+    for sig, label, color, z, lw in (
+        (y - model, "residuals", "C3", 1, 0.6),
+        (model, "fit", "C1", 2, 0.8),
+        (y, "data", "C0", 3, 0.9),
     ):
         _, su, rate = resample_uniform(t, sig)
         f, a = amplitude_spectrum(su, rate)
-        ax.semilogy(f, np.maximum(a, 1e-30), lw=0.7, label=label, color=color)
+        ax.semilogy(f, np.maximum(a, 1e-30), lw=lw, label=label, color=color, zorder=z,
+                    alpha=0.6 if label == "residuals" else 1.0)  # fmt: skip
     nyquist = rate / 2
     for k, fm in enumerate(modes):
         seen = abs(fm - rate * round(fm / rate))  # where the sampling puts it

@@ -23,6 +23,6 @@ def plot_confusion(path: str | Path, conf, labels, *, title: str = "") -> Path:
     ax.set_xlabel("predicted")
     ax.set_ylabel("true")
     ax.set_title(title or f"accuracy {np.trace(conf) / max(conf.sum(), 1):.3f}")
-    fig.colorbar(im, ax=ax, fraction=0.046)
+    fig.colorbar(im, ax=ax, fraction=0.046).set_label("share of the true class's windows")
     fig.tight_layout()
     return _save(fig, path, dpi=120)

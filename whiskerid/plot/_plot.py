@@ -57,10 +57,26 @@ def _spectrum_axes(ax, t, x, *, label: str, n_peaks: int = 3) -> None:
             textcoords="offset points",
         )
     ax.set_xlabel("frequency (Hz)")
-    ax.set_ylabel(f"|FFT| {label}")
+    ax.set_ylabel(f"amplitude spectrum, {label}" if label else "amplitude spectrum")
     ax.set_xlim(0, freqs[-1])
     top = amps.max() if amps.size else 1.0
     ax.set_ylim(top * 1e-5, top * 3)
+
+
+def _activity_end(t: np.ndarray, x: np.ndarray) -> float | None:
+    """Where a signal that dies out (a pluck) is worth showing to: half as long again as it
+    stays above 2 % of its largest swing about its final level; None when it lasts more
+    than half the record (a sine, a terrain), which is then shown whole."""
+    t, x = np.asarray(t, float), np.asarray(x, float)
+    if t.size < 10 or not np.all(np.isfinite(x)):
+        return None
+    dev = np.abs(x - np.median(x[-max(t.size // 10, 1) :]))
+    if dev.max() == 0:
+        return None
+    last = t[np.flatnonzero(dev > 0.02 * dev.max())[-1]]
+    if last - t[0] > 0.5 * (t[-1] - t[0]):
+        return None
+    return float(t[0] + 1.5 * (last - t[0]))
 
 
 def plot_signal_and_spectrum(
@@ -72,6 +88,8 @@ def plot_signal_and_spectrum(
     ax_t.plot(t, x, lw=0.7)
     ax_t.set_xlabel("t (s)")
     ax_t.set_ylabel(label)
+    if (end := _activity_end(t, x)) is not None:  # a pluck dies out: show its decay
+        ax_t.set_xlim(t[0], end)
     _spectrum_axes(ax_f, t, x, label=label)
     fig.suptitle(title)
     return _save(fig, path)
@@ -98,7 +116,7 @@ def plot_modal_analysis(path: str | Path, cases: list[dict]) -> Path:
             f"{case.get('model', '')} h_b = {case['hb_m'] * 1e3:g} mm, f_b = {case['fb_hz']:g} Hz",
             fontsize=9,
         )
-        _spectrum_axes(ax_f, t, y, label="y_s")
+        _spectrum_axes(ax_f, t, y, label="y_s (m)")
         ax_f.set_xlim(0, min(1000.0, ax_f.get_xlim()[1]))
     return _save(fig, path)
 

@@ -1,5 +1,7 @@
 """Running emcee: walkers from the Laplace approximation, moves, HDF5 backend and resume."""
 
+import errno
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -105,7 +107,7 @@ def run_sampler(
             import h5py  # noqa: F401
         except ImportError:
             raise PosteriorError("the HDF5 backend needs h5py (pip install h5py)") from None
-        be = emcee.backends.HDFBackend(str(backend), name="whiskerid")
+        be = _checked_backend(emcee)(str(backend), name="whiskerid")
         if resume:
             if not Path(backend).exists() or be.iteration == 0:
                 raise PosteriorError(f"{backend}: nothing to resume")
@@ -131,6 +133,38 @@ def run_sampler(
         if stop is not None and stop():
             raise KeyboardInterrupt
     return sampler
+
+
+#: Free space a chain file's disk must keep before each step is written. HDF5 cannot survive
+#: a write that fails for want of space (it crashed the process, leaving the chain at a
+#: torn step), so a step is never begun short of it: the run stops with the chain whole.
+CHAIN_FREE_BYTES = 8 << 20
+
+
+def _checked_backend(emcee):
+    """emcee's HDF5 backend, checking the free space before it writes anything."""
+
+    class CheckedHDFBackend(emcee.backends.HDFBackend):
+        def _check_space(self) -> None:
+            folder = Path(self.filename).resolve().parent
+            free = shutil.disk_usage(folder).free
+            if free < CHAIN_FREE_BYTES:
+                raise OSError(
+                    errno.ENOSPC,
+                    f"{free / 1e6:.3g} MB left on its disk: stopped before writing step "
+                    f"{self.iteration + 1}, the chain whole to there; free some space and "
+                    "continue it with --resume",
+                )
+
+        def grow(self, ngrow, blobs):
+            self._check_space()
+            super().grow(ngrow, blobs)
+
+        def save_step(self, state, accepted):
+            self._check_space()
+            super().save_step(state, accepted)
+
+    return CheckedHDFBackend
 
 
 def sample_posterior(

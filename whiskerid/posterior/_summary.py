@@ -49,17 +49,45 @@ class Posterior:
     derived_chain: np.ndarray | None = field(default=None, repr=False)
 
     def to_json(self) -> dict:
-        """The JSON summary (``whiskerid posterior --json``)."""
-        return {
-            "converged": self.diagnostics["converged"],
-            "params": self.params,
-            "tau": self.diagnostics["tau"],
-            "acceptance": self.diagnostics["acceptance"],
-            "ess": {k: v["ess"] for k, v in self.params.items()},
-            "diagnostics": self.diagnostics,
-            "correlations": self.correlations,
-            "provenance": self.provenance,
-        }
+        """The JSON summary (``whiskerid posterior --json``); a number that could not be
+        estimated (τ and ESS of a chain too short) is null, never NaN."""
+        return finite_or_none(
+            {
+                "converged": self.diagnostics["converged"],
+                "params": self.params,
+                "tau": self.diagnostics["tau"],
+                "acceptance": self.diagnostics["acceptance"],
+                "ess": {k: v["ess"] for k, v in self.params.items()},
+                "diagnostics": self.diagnostics,
+                "correlations": self.correlations,
+                "provenance": self.provenance,
+            }
+        )
+
+
+def finite_or_none(obj):
+    """``obj`` with every non-finite float replaced by None (JSON's null): NaN is not JSON,
+    and an estimate that does not exist must read as absent, not as a number."""
+    if isinstance(obj, dict):
+        return {k: finite_or_none(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [finite_or_none(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+def without_none(obj):
+    """``obj`` without the None values of its tables (TOML has no null): an estimate that
+    does not exist is left out of the record, and so is a list (a correlation matrix)
+    holding one."""
+    if isinstance(obj, dict):
+        kept = {k: without_none(v) for k, v in obj.items()}
+        return {k: v for k, v in kept.items() if v is not None}
+    if isinstance(obj, list):
+        items = [without_none(v) for v in obj]
+        return None if any(v is None for v in items) else items
+    return obj
 
 
 def derived_quantities(prob: Problem, z: np.ndarray) -> tuple[np.ndarray, list[str]]:
@@ -216,5 +244,5 @@ def _updated_record(record: WhiskerRecord, post: Posterior) -> WhiskerRecord:
         "provenance": post.provenance,
     }
     extra = dict(record.extra)
-    extra["posterior"] = table
+    extra["posterior"] = without_none(finite_or_none(table))
     return record.replace(extra=extra)

@@ -73,6 +73,9 @@ nominal one, and the drivetrain vibration level by a factor of 2. Everything is 
 a seed and does not depend on which other terrains or speeds are synthesised with it.
 """
 
+import os
+import shutil
+import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -315,7 +318,8 @@ def synthesize_dataset(
         progress: A progress bar on stderr, one step per recording written.
 
     Each recording is written as soon as its batch of runs is simulated, so memory does
-    not grow with the number of runs and an interrupted call leaves whole files.
+    not grow with the number of runs; they are written beside ``out``'s recordings and
+    moved in together at the end, so a full disk or an interruption leaves none of them.
 
     Returns:
         The CSV paths, in terrain, speed, run order.
@@ -349,7 +353,25 @@ def synthesize_dataset(
 
         recs = tqdm(recs, total=len(specs), desc="dataset synth", unit="run", file=sys.stderr,
                     leave=False)  # fmt: skip
-    return [write_csv(path, rec) for path, rec in zip(paths, recs, strict=True)]
+    out = Path(out)
+    created = not out.exists()
+    out.mkdir(parents=True, exist_ok=True)
+    # All or nothing: the recordings are written into a hidden folder beside their places
+    # and moved in (renames, which need no space) only when every one is whole.
+    stage = Path(tempfile.mkdtemp(prefix=".synth-", suffix=".tmp", dir=out))
+    try:
+        staged = [write_csv(stage / p.relative_to(out), rec)
+                  for p, rec in zip(paths, recs, strict=True)]  # fmt: skip
+        for src, dst in zip(staged, paths, strict=True):
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(src, dst)
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        if created and not any(out.iterdir()):
+            out.rmdir()
+        raise
+    shutil.rmtree(stage, ignore_errors=True)
+    return paths
 
 
 def _check_dataset_args(terrains, speeds, duration_s) -> None:
@@ -380,6 +402,12 @@ def _check_dataset_folder(out: Path, replaceable: list[Path]) -> None:
         raise ValueError(f"{out} is a file; give a new or empty folder")
     if not out.exists():
         return
+    stray = sorted(p.name for p in out.iterdir() if p.is_file() and not p.name.startswith("."))
+    if stray:  # a model folder (model.json), a recording's folder: not a dataset's
+        raise ValueError(
+            f"{out} holds files of its own (e.g. {stray[0]}), not a dataset's "
+            "<terrain>/ folders; give a new or empty folder (even with --force)"
+        )
     own = {p for p in replaceable if p.exists() and _is_synthetic(p)}
     found = sorted(p for p in out.rglob("*.csv") if p not in own)
     if found:
