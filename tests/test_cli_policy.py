@@ -363,3 +363,49 @@ def test_posterior_resume_refuses_a_chain_that_does_not_say_its_data(tree, capsy
     argv = ["posterior", str(tree / "rec.csv"), "--fit", PAPER, "--out", str(tree / "post")]
     assert main([*argv, "--resume"]) == 2
     assert "does not say which data" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------------ progress, --quiet
+@pytest.mark.parametrize("name", sorted(COMMANDS))
+def test_every_command_has_quiet(name):
+    parser = COMMANDS[name]
+    if any(isinstance(a, argparse._SubParsersAction) for a in parser._actions):
+        return  # a group (dataset, fleet): its commands are checked one by one
+    assert "--quiet" in parser.format_help(), name
+
+
+@pytest.mark.parametrize("quiet", [False, True])
+def test_a_long_command_says_what_it_is_doing_unless_quiet(tmp_path, monkeypatch, capsys, quiet):
+    import time
+
+    import whiskerid.cli._calibrate as c
+    from whiskerid.cli import _common
+
+    def slow(args, *rest):
+        _common.progress_step("fitting")
+        time.sleep(0.1)
+        _common.say("done")
+        return {}
+
+    monkeypatch.setattr(c, "_cmd_calibrate", slow)
+    monkeypatch.setattr(_common, "STATUS_DELAY_S", 0.0)
+    argv = ["calibrate", "x.csv", "--whisker", PAPER, "--out", str(tmp_path / "o.toml")]
+    assert main(argv + ["--quiet"] * quiet) == 0
+    err = capsys.readouterr().err
+    if quiet:
+        assert err.strip() == "done"
+    else:
+        assert "whiskerid calibrate: fitting … 0 s" in err and err.strip().endswith("done")
+
+
+def test_the_ticker_shows_steps_on_a_log_and_nothing_when_off(capsys):
+    from whiskerid.cli._common import Ticker
+
+    with Ticker("whiskerid demo", show=True, delay_s=0.0) as t:
+        t.step("[4] calibration")
+        t.say("a result")
+    err = capsys.readouterr().err
+    assert "whiskerid demo: [4] calibration … 0 s" in err and "a result" in err
+    with Ticker("whiskerid demo", show=False, delay_s=0.0) as t:
+        t.step("[4] calibration")
+    assert capsys.readouterr().err == ""

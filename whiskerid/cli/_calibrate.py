@@ -4,7 +4,7 @@ import argparse
 from pathlib import Path
 
 from .._choices import EXCITATIONS, OBSERVABLES, PINS, SOLVERS
-from ._common import FORCE_HELP, HelpFormatter, check_outputs
+from ._common import FORCE_HELP, HelpFormatter, check_outputs, progress_step
 
 
 def add_calibrate(sub, command_error) -> None:
@@ -170,8 +170,10 @@ def _cmd_calibrate(args, command_error, parser) -> dict:
     columns = _plane_columns(args.signal_col, command_error)
     if columns is not None:
         return _calibrate_planes(args, parser, record, columns, command_error)
+    progress_step("reading the recordings, finding the releases")
     obs = [o for p in args.recordings for o in load_observations(p, record, args)]
     static = read_static_test(args.static) if args.static else None
+    progress_step("fitting (a new recording shape is compiled once: tens of seconds)")
     cal = calibrate(
         record,
         obs,
@@ -182,6 +184,7 @@ def _cmd_calibrate(args, command_error, parser) -> dict:
         solver=args.solver,
         f1_start_hz=args.f1_start,
     )
+    progress_step("writing")
     _with_options(cal.record, args, parser).save(args.out)
     print(cal.report(), file=sys.stderr)
     print(f"wrote {args.out}", file=sys.stderr)

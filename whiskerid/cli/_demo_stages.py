@@ -21,7 +21,7 @@ import numpy as np
 from ..fit import dominant_peaks
 from ..io import write_csv
 from ..model import harmonic_steady_state, observe, paper_eq1, paper_record, simulate
-from ._common import interrupts
+from ._common import interrupts, progress_step
 
 MODAL_CASES = [(hb, fb) for fb in (100.0, 300.0) for hb in (1e-4, 3e-4)]
 
@@ -34,12 +34,14 @@ def run_demo(out: Path, *, plots: bool = True, say=print) -> dict:
     whisker = record.whisker()
     coil = record.structure
     f_n = [float(f) for f in whisker.natural_frequencies_hz]
+    progress_step("[1] the paper's whisker")
     say(
         f"[1] {record.name}: EI = {coil.EI:.4g} N m^2, C = {coil.coil_factor:.4g}, "
         f"rho*a = {coil.rho_a:.4g} kg/m"
     )
     say("      natural frequencies (Hz): " + ", ".join(f"{f:.1f}" for f in f_n))
 
+    progress_step("[2] modal analysis")
     say("[2] modal analysis, 1 s at 20 kHz, sensor at x_s = 5 mm (peaks in Hz)")
     t = np.arange(20_000) / 20_000.0
     modal = []
@@ -59,6 +61,7 @@ def run_demo(out: Path, *, plots: bool = True, say=print) -> dict:
             f"paper Eq. 1 {row['paper']['peaks_hz']}, exact steady state {row['exact']['peaks_hz']}"
         )
 
+    progress_step("[3] what the Pi records")
     say("[3] what the Pi records: Hall sensor + ADS1115 (475 SPS) polled at 200 Hz, 5 s")
     recordings = {}
     for label, kwargs in (
@@ -118,6 +121,7 @@ def _calibration_stage(out: Path, record, *, plots: bool, say) -> dict:
 
     from ..fit import Observation, calibrate
 
+    progress_step("[4] calibration")
     say("[4] calibration: a pluck recorded by the ADS1115 at 200 Hz (10 s, SNR 30 dB), fitted")
     say("    from a nominal record 30 % off (start values from the data)")
     sim = simulate(
@@ -162,6 +166,7 @@ def _posterior_stage(out: Path, record, obs, *, plots: bool, say) -> dict:
     """emcee posterior of the calibrated pluck's ζ and f_1 (a short, converged run)."""
     from ..posterior import sample_posterior
 
+    progress_step("[5] posterior (emcee)")
     say("[5] posterior of zeta with emcee: the calibrated pluck, 32 walkers x 1000 steps")
     # 1000 steps: tau is about 11 steps here with the default (differential-evolution)
     # move, and 50 tau is the convergence criterion.
@@ -204,6 +209,7 @@ def _stream_stage(out: Path, model_dir: Path, *, say, terrain: str = "brick") ->
     from ..classify import ClassifierModel
     from ..hw import OnlineClassifier, open_recorder, run_stream, terrain_source
 
+    progress_step("[7] online stream")
     say(f"[7] online stream: emulated ADS1115 fed by the simulator on {terrain} at 0.2 m/s, 10 s")
     clock = hw.FakeClock()
     timing = {"clock": clock.now_ns, "sleep": clock.sleep}
@@ -232,6 +238,7 @@ def _classification_stage(out: Path, *, plots: bool, say) -> dict:
     from ..plot import plot_confusion
     from ..terrain import synthesize_dataset
 
+    progress_step("[6] terrain classification")
     say("[6] terrain classification: 7 simulated terrains at 0.2 m/s, 16 runs x 6 s each")
     # Many short runs rather than a few long ones: what the network needs to see is the
     # run-to-run variation of each terrain (6 runs: 0.68 on held-out runs, 16: 0.94).
@@ -260,3 +267,23 @@ def _classification_stage(out: Path, *, plots: bool, say) -> dict:
         "per_class": res["per_class"],
         "model": str(out / "terrain-model"),
     }
+
+
+def summary_lines(summary: dict, out: Path) -> list[str]:
+    """The demo's results in a few lines (printed on stdout at the end)."""
+    f = summary["natural_frequencies_hz"]
+    cal, post = summary["calibration"], summary["posterior"]
+    cls, stream = summary["classification"], summary["stream"]
+    z = post["zeta"]
+    return [
+        f"whiskerid demo: {summary['whisker']}, outputs in {out}/",
+        f"  natural frequencies: {', '.join(f'{x:.1f}' for x in f[:3])} Hz",
+        f"  calibration ({cal['status']}): f1 = {cal['f1_hz']['value']:.3f} "
+        f"± {cal['f1_hz']['std']:.3f} Hz, zeta = {cal['zeta']['value']:.4f} "
+        f"± {cal['zeta']['std']:.4f}",
+        f"  posterior: zeta = {z['median']:.4f} (68 %: {z['q16']:.4f} to {z['q84']:.4f}), "
+        f"{'converged' if post['converged'] else 'not converged'}",
+        f"  terrain classifier: accuracy {cls['accuracy']:.3f} on held-out recordings",
+        f"  online stream: {stream['fraction_correct']:.0%} of {stream['windows']} windows "
+        "labelled right",
+    ]
