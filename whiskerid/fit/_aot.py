@@ -8,9 +8,10 @@ the calibration's solver, every run. Here the lowered program is kept instead, a
 folder (:func:`whiskerid._compile_cache.cache_dir`), under a key made of everything the
 program depends on: the program's name and static options, the structure and shapes of its
 arguments, the versions of JAX, jaxlib, equinox, optimistix and lineax, the float64 switch,
-the backend, and a digest of whiskerid's own source. A later run reads the artefact
-(milliseconds), wraps it in a trivial jitted call and gets the executable from JAX's
-persistent compilation cache in the same folder: nothing is traced or lowered again.
+the backend, and a digest of the source of whiskerid's ``fit``, ``model`` and ``io``. A
+later run reads the artefact (milliseconds), wraps it in a trivial jitted call and gets the
+executable from JAX's persistent compilation cache in the same folder: nothing is traced or
+lowered again.
 
 The command line points JAX's cache at that folder before JAX starts. A user's program that
 has not configured a JAX cache of its own gets the same folder for these programs only: it is
@@ -95,7 +96,11 @@ def _environment() -> list[str]:
                 versions.append(f"{dist}=?")
         digest = hashlib.sha256()
         package = Path(__file__).resolve().parents[1]
-        for path in sorted(package.rglob("*.py")):
+        # What a fit program is made of: the fit and model packages and the package's own
+        # top-level modules (the command line and the other packages are not in it).
+        sources = [*package.glob("*.py"), *(package / "fit").rglob("*.py"),
+                   *(package / "model").rglob("*.py"), *(package / "io").rglob("*.py")]  # fmt: skip
+        for path in sorted(sources):
             digest.update(str(path.relative_to(package)).encode())
             digest.update(path.read_bytes())
         _ENVIRONMENT.extend([
