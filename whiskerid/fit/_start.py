@@ -77,11 +77,15 @@ def envelope_zeta(t: np.ndarray, y: np.ndarray, f_obs_hz: float, f_true_hz: floa
 
 # --------------------------------------------------------------------------- start grid
 _MAX_PROFILE_SAMPLES = 6000
-#: Points of the start grid (candidates beyond are dropped, padding is never chosen):
-#: 33 geometric f_1 plus up to 6 spectral peaks per decay recording, times up to 11 ζ.
-GRID_POINTS = 512
+#: Candidate f_1 of the start search (beyond are dropped, padding is never chosen): 17
+#: geometric steps plus each decay recording's spectral peaks and their aliases.
+F_POINTS = 48
+#: Candidate ζ in the second stage of the search: the record's ×¼…×4 and the envelopes'.
+Z_POINTS = 12
+#: f_1 candidates (the best of the first stage) whose ζ is searched in the second.
+_REFINED = 4
 #: Grid points profiled at once (vectorised) inside the sequential map over the grid.
-_GRID_BATCH = 32
+_GRID_BATCH = 16
 #: Relative cost within which grid points count as equally good (aliases of each other).
 _NEAR = 1.02
 
@@ -105,14 +109,17 @@ def start_grid(
     *,
     f1_hz: float | None = None,
 ) -> dict[str, np.ndarray]:
-    """The start grid over ``(κ, ζ)``, seeded by the data, as arrays of :data:`GRID_POINTS`.
+    """The start grid over ``(κ, ζ)``, seeded by the data, as arrays of fixed sizes.
 
-    f_1 is searched within a factor 2.5 of the nominal (``f1_hz``, else the record's): 33
-    geometric steps plus the spectral peaks of every free decay with their aliases unfolded
-    (:func:`unalias`), each with ζ from the record (×¼…×4) and from the envelope's decay.
+    f_1 is searched within a factor 2.5 of the nominal (``f1_hz``, else the record's): 17
+    geometric steps (12 % apart) plus the spectral peaks of every free decay, each as the
+    line itself and with its aliases unfolded (:func:`unalias`); ζ among the record's (×¼…×4)
+    and the envelopes' decay rates (see :func:`start_from_grid` for the two stages).
 
     Returns:
-        ``log_kappa``, ``zeta`` and ``f_hz`` per point, ``valid`` (0 for padding),
+        ``f_hz`` and ``log_kappa`` of each f_1 candidate and ``f_valid`` (0 for padding);
+        ``zeta1``, the two ζ of the first stage (the record's and the envelopes' median);
+        ``zeta`` and ``z_valid``, the second stage's;
         ``f_ref_hz`` (the centre of the search), ``nyquist_hz`` (of the fastest free-decay
         recording; infinite without one), ``prefer_baseband`` (1 unless ``f1_hz`` was given:
         see :func:`start_from_grid`), ``log_ei`` and ``static_d0`` (a static test's start).
@@ -123,7 +130,7 @@ def start_grid(
     # At low sample rates a higher mode can alias onto the first (e.g. f_2 = 645 Hz folds to
     # 45 Hz at 200 Hz): each candidate is judged by the cost of the whole multi-mode model.
     lo, hi = f1_nom / 2.5, f1_nom * 2.5
-    f_cands = list(f1_nom * np.geomspace(1 / 2.5, 2.5, 33))
+    f_cands = list(f1_nom * np.geomspace(1 / 2.5, 2.5, 17))
     z_cands = [zeta_nom * k for k in (0.25, 0.5, 1.0, 2.0, 4.0)]
     nyquist = np.inf
     for o in observations:
@@ -143,12 +150,12 @@ def start_grid(
             z = envelope_zeta(o.t, o.y, fp, f_true) if lo <= f_true <= hi else None
             if z is not None:
                 z_cands.append(z)
-    # At most 11 ζ (the record's five, then the envelopes' in order) and as many f_1 as fit.
-    z_cands = np.clip(np.unique(np.round(z_cands[:11], 6)), 1e-4, 0.5)
-    f_cands = np.asarray(f_cands)[: GRID_POINTS // z_cands.size]
-    grid_f = np.repeat(f_cands, z_cands.size)
-    grid_z = np.tile(z_cands, f_cands.size)
-    pad = GRID_POINTS - grid_f.size
+    # The record's five ζ, then the envelopes' in order; as many f_1 as fit.
+    envelopes = z_cands[5:]
+    zeta1 = [zeta_nom, float(np.median(envelopes)) if envelopes else 2 * zeta_nom]
+    z_cands = np.clip(np.unique(np.round(z_cands[:Z_POINTS], 6)), 1e-4, 0.5)
+    f_cands = np.asarray(f_cands)[:F_POINTS]
+    pad_f, pad_z = F_POINTS - f_cands.size, Z_POINTS - z_cands.size
     log_ei, d0 = math.log(float(nominal.EI)), 0.0
     if problem.fit_ei:
         fit = np.asarray(problem.static_test.line_fit)
@@ -156,10 +163,12 @@ def start_grid(
         ei = (x**2 * (3 * l - x) / 6) / fit[1] if fit[1] > 0 else float(nominal.EI)
         log_ei, d0 = math.log(ei), float(fit[0])
     return {
-        "log_kappa": np.pad(np.log(_kappa_from_f1(nominal, grid_f)), (0, pad), mode="edge"),
-        "zeta": np.pad(grid_z, (0, pad), mode="edge"),
-        "f_hz": np.pad(grid_f, (0, pad), mode="edge"),
-        "valid": np.pad(np.ones(grid_f.size), (0, pad)),
+        "log_kappa": np.pad(np.log(_kappa_from_f1(nominal, f_cands)), (0, pad_f), mode="edge"),
+        "f_hz": np.pad(f_cands, (0, pad_f), mode="edge"),
+        "f_valid": np.pad(np.ones(f_cands.size), (0, pad_f)),
+        "zeta1": np.clip(np.asarray(zeta1), 1e-4, 0.5),
+        "zeta": np.pad(z_cands, (0, pad_z), mode="edge"),
+        "z_valid": np.pad(np.ones(z_cands.size), (0, pad_z)),
         "f_ref_hz": np.asarray(f1_nom),
         "nyquist_hz": np.asarray(nyquist),
         "prefer_baseband": np.asarray(0.0 if f1_hz else 1.0),
@@ -172,11 +181,13 @@ def start_from_grid(problem: FitProblem, grid: dict, masks=None) -> dict:
     """The start parameters from :func:`start_grid` (traceable): the grid point of least
     profile cost, with the linear coefficients solved exactly there.
 
-    Among points within 2 % of the least cost (a line and its alias fit alike), the one
-    nearest the centre of the search, preferring those below the Nyquist frequency of the
-    free decays unless f_1 was given (``prefer_baseband``): a sampling rate is chosen to
-    resolve f_1, and a record's f_1 may well be 30 % off, which puts a line near the
-    Nyquist frequency closer to its alias.
+    Two stages: every f_1 candidate with the first stage's two ζ, then the four best f_1
+    with every ζ candidate (the profile cost of a decay depends on ζ far less than on f_1,
+    so the full product is not needed). Among points within 2 % of the least cost (a line
+    and its alias fit alike), the one nearest the centre of the search, preferring those
+    below the Nyquist frequency of the free decays unless f_1 was given
+    (``prefer_baseband``): a sampling rate is chosen to resolve f_1, and a record's f_1 may
+    well be 30 % off, which puts a line near the Nyquist frequency closer to its alias.
 
     Args:
         problem: The fit problem.
@@ -186,20 +197,36 @@ def start_from_grid(problem: FitProblem, grid: dict, masks=None) -> dict:
     steps = profile_steps(problem)
     if masks is None:
         masks = [jnp.ones(r.t.shape[0]) for r in problem.recordings]
-    zeta_u = _lsq.from_interval(grid["zeta"], 0.0, ZETA_MAX)
 
-    def cost(point):
-        return _profile_cost(problem, steps, masks, point[0], point[1], grid["log_ei"])
+    def costs(log_kappa, zeta, valid):
+        zu = _lsq.from_interval(zeta, 0.0, ZETA_MAX)
+        c = jax.lax.map(
+            lambda p: _profile_cost(problem, steps, masks, p[0], p[1], grid["log_ei"]),
+            (log_kappa, zu),
+            batch_size=_GRID_BATCH,
+        )
+        return jnp.where((valid > 0) & jnp.isfinite(c), c, jnp.inf), zu
 
-    costs = jax.lax.map(cost, (grid["log_kappa"], zeta_u), batch_size=_GRID_BATCH)
-    costs = jnp.where((grid["valid"] > 0) & jnp.isfinite(costs), costs, jnp.inf)
-    near = costs <= jnp.min(costs) * _NEAR + 1e-300
-    below = grid["f_hz"] <= grid["nyquist_hz"]
+    nf, nz = grid["f_hz"].shape[0], grid["zeta"].shape[0]
+    # stage 1: every f_1 with two ζ
+    lk1 = jnp.repeat(grid["log_kappa"], 2)
+    f1 = jnp.repeat(grid["f_hz"], 2)
+    c1, zu1 = costs(lk1, jnp.tile(grid["zeta1"], nf), jnp.repeat(grid["f_valid"], 2))
+    # stage 2: the best f_1 with every ζ
+    top = jnp.argsort(jnp.min(c1.reshape(nf, 2), axis=1))[:_REFINED]
+    lk2 = jnp.repeat(grid["log_kappa"][top], nz)
+    f2 = jnp.repeat(grid["f_hz"][top], nz)
+    valid2 = jnp.repeat(grid["f_valid"][top], nz) * jnp.tile(grid["z_valid"], _REFINED)
+    c2, zu2 = costs(lk2, jnp.tile(grid["zeta"], _REFINED), valid2)
+    cost, f_hz = jnp.concatenate([c1, c2]), jnp.concatenate([f1, f2])
+    log_kappa, zeta_u = jnp.concatenate([lk1, lk2]), jnp.concatenate([zu1, zu2])
+    near = cost <= jnp.min(cost) * _NEAR + 1e-300
+    below = f_hz <= grid["nyquist_hz"]
     shun = (grid["prefer_baseband"] > 0) & jnp.any(near & below) & ~below
-    score = jnp.abs(jnp.log(grid["f_hz"] / grid["f_ref_hz"])) + jnp.where(shun, 1e3, 0.0)
+    score = jnp.abs(jnp.log(f_hz / grid["f_ref_hz"])) + jnp.where(shun, 1e3, 0.0)
     best = jnp.argmin(jnp.where(near, score, jnp.inf))
     theta = jax.tree_util.tree_map(jnp.asarray, problem.zero_params())
-    theta["log_kappa"] = grid["log_kappa"][best]
+    theta["log_kappa"] = log_kappa[best]
     theta["zeta_u"] = jnp.full(jnp.shape(theta["zeta_u"]), zeta_u[best])
     if problem.fit_ei:
         theta["log_EI"] = grid["log_ei"]
