@@ -13,6 +13,7 @@ The demo orchestrates every layer of the library, so its stages live with the co
 7. the Pi's online loop on an emulated ADS1115: sample, classify every 0.5 s, record.
 """
 
+import time
 from pathlib import Path
 
 import jax.numpy as jnp
@@ -21,7 +22,23 @@ import numpy as np
 from ..fit import dominant_peaks
 from ..io import write_csv
 from ..model import harmonic_steady_state, observe, paper_eq1, paper_record, simulate
-from ._common import interrupts, progress_step
+from ._common import interrupts
+from ._common import progress_step as _progress_step
+
+#: Seconds each stage took in the last run (its name → s), for the summary.
+_STAGES: dict[str, float] = {}
+_CLOCK: list = []
+
+
+def progress_step(name: str) -> None:
+    """Start the stage ``name``: on the status line, and timed for the summary."""
+    now = time.perf_counter()
+    if _CLOCK:
+        _STAGES[_CLOCK[0][0]] = round(now - _CLOCK[0][1], 2)
+        _CLOCK.clear()
+    _CLOCK.append((name, now))
+    _progress_step(name)
+
 
 MODAL_CASES = [(hb, fb) for fb in (100.0, 300.0) for hb in (1e-4, 3e-4)]
 
@@ -30,6 +47,7 @@ def run_demo(out: Path, *, plots: bool = True, say=print) -> dict:
     """Run every stage, writing CSVs and PNGs under ``out``; returns a JSON-able summary."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    _STAGES.clear(), _CLOCK.clear()
     record = paper_record()
     whisker = record.whisker()
     coil = record.structure
@@ -112,6 +130,8 @@ def run_demo(out: Path, *, plots: bool = True, say=print) -> dict:
     summary["posterior"] = _posterior_stage(out, *calibrated, plots=plots, say=say)
     summary["classification"] = _classification_stage(out, plots=plots, say=say)
     summary["stream"] = _stream_stage(out, Path(summary["classification"]["model"]), say=say)
+    progress_step("done")
+    summary["stage_s"] = dict(_STAGES)
     return summary
 
 
