@@ -120,7 +120,8 @@ def test_recordings_in_one_bucket_share_a_program_and_the_padding_counts_for_not
     record = wi.paper_record()
     cals, counts = [], []
     for duration in (5.0, 4.9):  # 1000 and 980 samples: both padded to 1024
-        counts.append(_compiles(lambda d=duration: cals.append(wi.calibrate(record, _pluck(d)))))
+        obs = _pluck(duration)
+        counts.append(_compiles(lambda o=obs: cals.append(wi.calibrate(record, o))))
     assert counts[1] == 0, counts
     for cal in cals:
         flat = cal.problem.flatten(cal.optimum)

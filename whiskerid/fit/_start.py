@@ -88,6 +88,9 @@ _REFINED = 4
 _GRID_BATCH = 16
 #: Relative cost within which grid points count as equally good (aliases of each other).
 _NEAR = 1.02
+#: Relative cost within which the mirror below the Nyquist frequency of a line above it is
+#: preferred (see :func:`start_from_grid`).
+_MIRROR = 1.5
 
 
 def _kappa_from_f1(nominal: Whisker, f1_hz):
@@ -187,7 +190,10 @@ def start_from_grid(problem: FitProblem, grid: dict, masks=None) -> dict:
     and its alias fit alike), the one nearest the centre of the search, preferring those
     below the Nyquist frequency of the free decays unless f_1 was given
     (``prefer_baseband``): a sampling rate is chosen to resolve f_1, and a record's f_1 may
-    well be 30 % off, which puts a line near the Nyquist frequency closer to its alias.
+    well be 30 % off, which puts a line near the Nyquist frequency closer to its alias. For
+    the same reason a line above the Nyquist frequency gives way to its mirror below it
+    when the mirror's profile cost is within 50 % (the grid's f_1 are a few tenths of a hertz
+    off the line, which moves the two costs apart by up to about 25 %).
 
     Args:
         problem: The fit problem.
@@ -225,6 +231,14 @@ def start_from_grid(problem: FitProblem, grid: dict, masks=None) -> dict:
     shun = (grid["prefer_baseband"] > 0) & jnp.any(near & below) & ~below
     score = jnp.abs(jnp.log(f_hz / grid["f_ref_hz"])) + jnp.where(shun, 1e3, 0.0)
     best = jnp.argmin(jnp.where(near, score, jnp.inf))
+    # A line above the Nyquist frequency and its mirror below it differ in the samples only
+    # through the weaker higher modes, which on a grid (f_1 a few tenths of a hertz off) can
+    # favour either by tens of percent: the mirror is taken if it is within _MIRROR.
+    mirror = 2 * grid["nyquist_hz"] - f_hz[best]
+    is_mirror = (jnp.abs(f_hz - mirror) <= 5e-3 * mirror) & (f_hz <= grid["nyquist_hz"])
+    is_mirror = is_mirror & (cost <= cost[best] * _MIRROR)
+    use = (grid["prefer_baseband"] > 0) & (f_hz[best] > grid["nyquist_hz"]) & jnp.any(is_mirror)
+    best = jnp.where(use, jnp.argmin(jnp.where(is_mirror, cost, jnp.inf)), best)
     theta = jax.tree_util.tree_map(jnp.asarray, problem.zero_params())
     theta["log_kappa"] = log_kappa[best]
     theta["zeta_u"] = jnp.full(jnp.shape(theta["zeta_u"]), zeta_u[best])
