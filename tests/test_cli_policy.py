@@ -409,3 +409,21 @@ def test_the_ticker_shows_steps_on_a_log_and_nothing_when_off(capsys):
     with Ticker("whiskerid demo", show=False, delay_s=0.0) as t:
         t.step("[4] calibration")
     assert capsys.readouterr().err == ""
+
+
+def test_the_demo_ends_with_a_summary_of_its_results():
+    from whiskerid.cli._demo_stages import summary_lines
+
+    summary = {
+        "whisker": "paper-whisker",
+        "natural_frequencies_hz": [46.0, 288.2, 807.1],
+        "calibration": {"status": "ok", "f1_hz": {"value": 45.99, "std": 0.004},
+                        "zeta": {"value": 0.0399, "std": 0.0001}},
+        "posterior": {"zeta": {"median": 0.04, "q16": 0.0399, "q84": 0.0401}, "converged": True},
+        "classification": {"accuracy": 0.964},
+        "stream": {"fraction_correct": 0.89, "windows": 18},
+    }  # fmt: skip
+    text = "\n".join(summary_lines(summary, Path("demo")))
+    for expected in ("f1 = 45.990 ± 0.004 Hz", "calibration (ok)", "accuracy 0.964",
+                     "89% of 18 windows", "converged"):  # fmt: skip
+        assert expected in text, text
