@@ -8,9 +8,9 @@ parameters: log f_d, logit ζ, a, b, offset), on
   (deflection at the Hall sensor), fitted by optimistix Levenberg–Marquardt (jitted),
   ``scipy.optimize.least_squares(method="lm")`` and lmfit (``leastsq``), all on the same five
   parameters from the same data-derived start values (:func:`whiskerid.fit.window_start`)
-  and with the same relative tolerance 1e-8 on parameters and cost (and again at 1e-10,
-  calibrate()'s default): compile time, warm time per fit, steps or function evaluations, and
-  the fitted values;
+  and with the same relative tolerance 1e-8 on parameters and cost (calibrate()'s, and
+  again at 1e-10, the solver's default): compile time, warm time per fit, steps or function
+  evaluations, and the fitted values;
 * 1000 windows (1 s at 200 Hz, random f_d 20–80 Hz and ζ 0.01–0.06, SNR 30 dB) fitted by
   :func:`whiskerid.fit_windows`' solver (variable-projection Levenberg–Marquardt, all windows
   in one compiled ``vmap``-ed loop), by one ``vmap``-ed optimistix call
@@ -145,7 +145,7 @@ def single(repeats: int) -> dict:
         "nfev": int(r.nfev),
         **_decode([r.params[f"u{i}"].value for i in range(5)]),
     }
-    # The same three-way comparison at calibrate()'s tighter default tolerance
+    # The same three-way comparison at the solver's tighter default tolerance
     # (optimistix rtol 1e-10, atol 1e-12; SciPy xtol = ftol = 1e-10).
     tight = _lsq.make_solver()
 
