@@ -8,15 +8,22 @@ parameters: log f_d, logit ζ, a, b, offset), on
   (deflection at the Hall sensor), fitted by optimistix Levenberg–Marquardt (jitted),
   ``scipy.optimize.least_squares(method="lm")`` and lmfit (``leastsq``), all on the same five
   parameters from the same data-derived start values (:func:`whiskerid.fit.window_start`)
-  and with the same relative tolerance 1e-8 on parameters and cost (and again at 1e-10,
-  calibrate()'s default): compile time, warm time per fit, steps or function evaluations, and
-  the fitted values;
+  and with the same relative tolerance 1e-8 on parameters and cost (calibrate()'s, and
+  again at 1e-10, the solver's default): compile time, warm time per fit, steps or function
+  evaluations, and the fitted values;
 * 1000 windows (1 s at 200 Hz, random f_d 20–80 Hz and ζ 0.01–0.06, SNR 30 dB) fitted by
   :func:`whiskerid.fit_windows`' solver (variable-projection Levenberg–Marquardt, all windows
   in one compiled ``vmap``-ed loop), by one ``vmap``-ed optimistix call
   (``whiskerid.fit._lsq.batch_least_squares``) and by a SciPy loop, from the same start values.
 
-Run: ``python benchmarks/calibrate.py [--windows N]`` (prints one JSON object).
+And with ``--cli``, the command line as a user runs it (module ``_calibrate_cli``): ``whiskerid
+calibrate`` of a 5 s pluck at 200 Hz (1000 samples) with an empty compile cache (cold) and
+again (warm), on recordings of other lengths, and ``wi.calibrate`` from a fresh interpreter,
+each side by side with ``benchmarks/scipy_pluck.py`` (the same fit in NumPy and SciPy), their
+fitted f_1, ζ and 1σ, and where a warm run's time goes.
+
+Run: ``python benchmarks/calibrate.py [--windows N] [--cli] [--cli-only]`` (prints one JSON
+object).
 """
 
 import argparse
@@ -138,7 +145,7 @@ def single(repeats: int) -> dict:
         "nfev": int(r.nfev),
         **_decode([r.params[f"u{i}"].value for i in range(5)]),
     }
-    # The same three-way comparison at calibrate()'s tighter default tolerance
+    # The same three-way comparison at the solver's tighter default tolerance
     # (optimistix rtol 1e-10, atol 1e-12; SciPy xtol = ftol = 1e-10).
     tight = _lsq.make_solver()
 
@@ -252,7 +259,19 @@ def main() -> None:
     ap.add_argument("--windows", type=int, default=1000)
     ap.add_argument("--scipy-windows", type=int, default=1000, help="windows timed in the loop")
     ap.add_argument("--repeats", type=int, default=20)
+    ap.add_argument("--cli", action="store_true", help="also time the command line")
+    ap.add_argument("--cli-only", action="store_true", help="only time the command line")
     a = ap.parse_args()
+    if a.cli or a.cli_only:
+        import sys
+
+        sys.path.insert(0, str(__import__("pathlib").Path(__file__).parent))
+        from _calibrate_cli import cli
+
+        cli_result = cli()
+        if a.cli_only:
+            print(json.dumps({"benchmark": "calibrate --cli", "cli": cli_result}, indent=2))
+            return
     out = {
         "benchmark": "calibrate",
         "machine": {
@@ -264,6 +283,8 @@ def main() -> None:
         "single_fit": single(a.repeats),
         "batch": batch(a.windows, min(a.scipy_windows, a.windows)),
     }
+    if a.cli:
+        out["cli"] = cli_result
     print(json.dumps(out, indent=2))
 
 

@@ -10,7 +10,10 @@ the errors of f_1 and ζ, and the fits' statuses (a whisker whose f_1 is near th
 Nyquist frequency is ``check``: its alias fits as well). The peer, measured in the same run,
 is the same fit compiled anew for each whisker (JAX's caches cleared before each of
 ``--peer-fits`` fits), which is what a fit whose numbers are part of the compiled code's
-cache key costs.
+cache key costs. A second peer is SciPy: ``benchmarks/scipy_pluck.py``'s fit (the same model:
+offset, drift, two modes with f_2 tied to f_1, the ADS1115's conversion averaged; started at
+the largest spectral peak below the Nyquist frequency) on the same recordings in a loop, with
+its time per fit and its errors; both are counted right when f_1 is within 0.1 % of the truth.
 
 Run: ``python benchmarks/calibrate_many.py [--whiskers N] [--duration S]`` (prints JSON).
 """
@@ -26,6 +29,7 @@ import jax
 import numpy as np
 
 import whiskerid as wi
+from whiskerid.fit import _aot
 from whiskerid.model import CoilSpring
 
 _COMPILES: list[float] = []
@@ -91,9 +95,26 @@ def main() -> None:
         zeta_err.append(cal.params["zeta"]["value"] / float(w.zeta[0]) - 1)
         ok.append(cal.ok)
         status.append(cal.status)
+    scipy_times, scipy_f1_err = [], []
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from scipy_pluck import fit as scipy_fit
+
+    for rec, obs in zip(records, observations, strict=True):
+        w = rec.whisker()
+        f = np.asarray(w.natural_frequencies_hz)
+        t0 = time.perf_counter()
+        sp = scipy_fit(obs.t, obs.y, ratio=float(f[1] / f[0]),
+                       conversion_s=rec.adc.conversion_time_s)  # fmt: skip
+        scipy_times.append(time.perf_counter() - t0)
+        scipy_f1_err.append(sp["f1_hz"] / float(f[0]) - 1)
     peer_times, peer_compiles = [], []
     for rec, obs in list(zip(records, observations, strict=True))[1 : 1 + args.peer_fits]:
-        jax.clear_caches()
+        jax.clear_caches()  # and the calibration's program, in memory and on disk:
+        _aot._PROGRAMS.clear()
+        _aot.cache_dir = lambda: None
         before = len(_COMPILES)
         t0 = time.perf_counter()
         wi.calibrate(_nominal(rec), obs)
@@ -127,6 +148,12 @@ def main() -> None:
                     )
                 ),
                 "zeta_rel_error_median": float(np.median(np.abs(zeta_err))),
+                "f1_within_0.1%": int(np.sum(np.abs(f1_err) < 1e-3)),
+                "scipy_fit_s_median": round(statistics.median(scipy_times), 4),
+                "scipy_f1_within_0.1%": int(np.sum(np.abs(scipy_f1_err) < 1e-3)),
+                "warm_over_scipy": round(
+                    statistics.median(times[1:]) / statistics.median(scipy_times), 3
+                ),
                 "jax": jax.__version__,
                 "cpu": platform.processor() or platform.machine(),
             },

@@ -95,3 +95,71 @@ def test_window_fits_at_other_rates_compile_nothing_new():
 
     fit(200.0)
     assert _compiles(lambda: fit(333.0)) == 0
+
+
+# ------------------------------------------------------------------ shape buckets, the cache
+def test_shape_buckets_are_at_most_a_quarter_longer_and_never_shorter():
+    from whiskerid.fit._core import bucket
+
+    sizes = [bucket(n) for n in range(1, 20_000)]
+    assert all(b >= n for n, b in enumerate(sizes, start=1))
+    assert all(b <= max(64, 1.25 * n) for n, b in enumerate(sizes, start=1))
+    assert sizes == sorted(sizes) and len(set(sizes)) < 40  # few programs for every length
+    assert bucket(980) == bucket(1000) == 1024 and bucket(1200) == 1280
+
+
+def _pluck(duration_s, seed=1):
+    sim = wi.simulate(wi.paper_record(), excitation="decay", observable="adc", rate_hz=200,
+                      duration_s=duration_s, noise_db=30, seed=seed,
+                      tip_deflection_m=2e-3)  # fmt: skip
+    return wi.Observation(sim.t, sim.signal(), excitation="decay", observable="adc", gain=None)
+
+
+@pytest.mark.slow
+def test_recordings_in_one_bucket_share_a_program_and_the_padding_counts_for_nothing():
+    record = wi.paper_record()
+    cals, counts = [], []
+    for duration in (5.0, 4.9):  # 1000 and 980 samples: both padded to 1024
+        obs = _pluck(duration)
+        counts.append(_compiles(lambda o=obs: cals.append(wi.calibrate(record, o))))
+    assert counts[1] == 0, counts
+    for cal in cals:
+        flat = cal.problem.flatten(cal.optimum)
+        resid = np.asarray(cal.problem.residuals(cal.problem.unflatten(flat)))
+        n = cal.diagnostics["n_samples"]
+        assert resid.size == n  # the problem kept is the recording's own, unpadded
+        s2 = np.sum(resid**2) / (n - flat.size)
+        assert cal.diagnostics["reduced_chi2"] == pytest.approx(s2, rel=1e-6)
+        assert cal.ok and cal.params["f1_hz"]["value"] == pytest.approx(46.0, rel=1e-3)
+
+
+_FRESH = """
+import sys
+import jax.export
+import whiskerid as wi
+
+def refuse(*args, **kwargs):
+    raise AssertionError("traced and lowered again")
+
+if sys.argv[1] == "second":
+    jax.export.export = refuse
+sim = wi.simulate(wi.paper_record(), excitation="decay", observable="adc", rate_hz=200,
+                  duration_s=3, noise_db=30, seed=1, tip_deflection_m=2e-3)
+obs = wi.Observation(sim.t, sim.signal(), excitation="decay", observable="adc", gain=None)
+print(wi.calibrate(wi.paper_record(), obs).params["f1_hz"]["value"])
+"""
+
+
+@pytest.mark.slow
+def test_a_fresh_interpreter_loads_the_calibration_without_tracing_it(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "WHISKERID_COMPILE_CACHE": str(tmp_path)}
+    env.pop("JAX_COMPILATION_CACHE_DIR", None)
+    argv = [[sys.executable, "-c", _FRESH, which] for which in ("first", "second")]
+    out = [subprocess.run(a, env=env, capture_output=True, text=True, timeout=600) for a in argv]
+    assert [o.returncode for o in out] == [0, 0], out[1].stderr[-2000:]
+    assert out[0].stdout == out[1].stdout  # the same fit, from the program on disk
+    assert list((tmp_path / "programs").glob("*.jaxexport"))

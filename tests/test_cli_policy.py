@@ -363,3 +363,67 @@ def test_posterior_resume_refuses_a_chain_that_does_not_say_its_data(tree, capsy
     argv = ["posterior", str(tree / "rec.csv"), "--fit", PAPER, "--out", str(tree / "post")]
     assert main([*argv, "--resume"]) == 2
     assert "does not say which data" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------------ progress, --quiet
+@pytest.mark.parametrize("name", sorted(COMMANDS))
+def test_every_command_has_quiet(name):
+    parser = COMMANDS[name]
+    if any(isinstance(a, argparse._SubParsersAction) for a in parser._actions):
+        return  # a group (dataset, fleet): its commands are checked one by one
+    assert "--quiet" in parser.format_help(), name
+
+
+@pytest.mark.parametrize("quiet", [False, True])
+def test_a_long_command_says_what_it_is_doing_unless_quiet(tmp_path, monkeypatch, capsys, quiet):
+    import time
+
+    import whiskerid.cli._calibrate as c
+    from whiskerid.cli import _common
+
+    def slow(args, *rest):
+        _common.progress_step("fitting")
+        time.sleep(0.1)
+        _common.say("done")
+        return {}
+
+    monkeypatch.setattr(c, "_cmd_calibrate", slow)
+    monkeypatch.setattr(_common, "STATUS_DELAY_S", 0.0)
+    argv = ["calibrate", "x.csv", "--whisker", PAPER, "--out", str(tmp_path / "o.toml")]
+    assert main(argv + ["--quiet"] * quiet) == 0
+    err = capsys.readouterr().err
+    if quiet:
+        assert err.strip() == "done"
+    else:
+        assert "whiskerid calibrate: fitting … 0 s" in err and err.strip().endswith("done")
+
+
+def test_the_ticker_shows_steps_on_a_log_and_nothing_when_off(capsys):
+    from whiskerid.cli._common import Ticker
+
+    with Ticker("whiskerid demo", show=True, delay_s=0.0) as t:
+        t.step("[4] calibration")
+        t.say("a result")
+    err = capsys.readouterr().err
+    assert "whiskerid demo: [4] calibration … 0 s" in err and "a result" in err
+    with Ticker("whiskerid demo", show=False, delay_s=0.0) as t:
+        t.step("[4] calibration")
+    assert capsys.readouterr().err == ""
+
+
+def test_the_demo_ends_with_a_summary_of_its_results():
+    from whiskerid.cli._demo_stages import summary_lines
+
+    summary = {
+        "whisker": "paper-whisker",
+        "natural_frequencies_hz": [46.0, 288.2, 807.1],
+        "calibration": {"status": "ok", "f1_hz": {"value": 45.99, "std": 0.004},
+                        "zeta": {"value": 0.0399, "std": 0.0001}},
+        "posterior": {"zeta": {"median": 0.04, "q16": 0.0399, "q84": 0.0401}, "converged": True},
+        "classification": {"accuracy": 0.964},
+        "stream": {"fraction_correct": 0.89, "windows": 18},
+    }  # fmt: skip
+    text = "\n".join(summary_lines(summary, Path("demo")))
+    for expected in ("f1 = 45.990 ± 0.004 Hz", "calibration (ok)", "accuracy 0.964",
+                     "89% of 18 windows", "converged"):  # fmt: skip
+        assert expected in text, text

@@ -1,33 +1,24 @@
 """JAX's persistent compilation cache for the command line: a second run on the machine
 loads the compiled programs instead of compiling them again.
 
-The folder is ``$WHISKERID_COMPILE_CACHE`` if set (``none``, ``off`` or empty switches the
-cache off), else ``$XDG_CACHE_HOME/whiskerid/jax`` or ``~/.cache/whiskerid/jax``. It is set
-through JAX's own environment variables before JAX is imported, so a user's
-``JAX_COMPILATION_CACHE_DIR`` wins, and ``import whiskerid`` in a user's program changes
-nothing.
+The folder is :func:`whiskerid._compile_cache.cache_dir` (``$WHISKERID_COMPILE_CACHE``, else
+``~/.cache/whiskerid/jax``). It is set through JAX's own environment variables before JAX is
+imported, so a user's ``JAX_COMPILATION_CACHE_DIR`` wins. In a user's program, ``import
+whiskerid`` changes nothing; the calibration's own program is cached in the same folder
+when it is compiled (:mod:`whiskerid.fit._aot`).
 """
 
 import os
 from pathlib import Path
 
-#: Environment variable naming the folder of JAX's persistent compilation cache.
-CACHE_ENV = "WHISKERID_COMPILE_CACHE"
+from .._compile_cache import CACHE_ENV as CACHE_ENV
+from .._compile_cache import cache_dir as cache_dir
 
 # JAX's options (lower case; upper case as environment variables) that cache every program.
 _CACHE_ALL = {
     "jax_persistent_cache_min_compile_time_secs": 0.0,
     "jax_persistent_cache_min_entry_size_bytes": 0,
 }
-
-
-def cache_dir() -> Path | None:
-    """The cache folder the command line uses, or None when switched off."""
-    env = os.environ.get(CACHE_ENV)
-    if env is not None:
-        return None if env.strip().lower() in ("", "off", "0", "none") else Path(env)
-    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
-    return Path(base) / "whiskerid" / "jax"
 
 
 def enable_compile_cache() -> Path | None:

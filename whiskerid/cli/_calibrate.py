@@ -6,7 +6,7 @@ from pathlib import Path
 
 from .._choices import EXCITATIONS, OBSERVABLES, PINS, SOLVERS
 from ._added_mass import add_added_mass_option, added_masses
-from ._common import FORCE_HELP, HelpFormatter, check_outputs
+from ._common import FORCE_HELP, HelpFormatter, check_outputs, progress_step
 
 
 def add_calibrate(sub, command_error) -> None:
@@ -190,12 +190,14 @@ def _cmd_calibrate(args, command_error, parser) -> dict:
     columns = _plane_columns(args.signal_col, command_error)
     if columns is not None:
         return _calibrate_planes(args, parser, record, columns, command_error)
+    progress_step("reading the recordings, finding the releases")
     obs_lists = [load_observations(p, record, args) for p in args.recordings]
     obs = [o for lst in obs_lists for o in lst]
     masses = added_masses(args.added_mass, args.recordings, obs_lists, command_error)
     if masses is not None:
         _check_added_mass(args, command_error)
     static = read_static_test(args.static) if args.static else None
+    progress_step("fitting (a new recording shape is compiled once: tens of seconds)")
     cal = calibrate(
         record,
         obs,
@@ -208,6 +210,7 @@ def _cmd_calibrate(args, command_error, parser) -> dict:
         added_mass=masses,
         modulus_tolerance=args.modulus_tolerance,
     )
+    progress_step("writing")
     _with_options(cal.record, args, parser).save(args.out)
     print(cal.report(), file=sys.stderr)
     print(f"wrote {args.out}", file=sys.stderr)

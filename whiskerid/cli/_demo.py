@@ -2,7 +2,7 @@
 
 from pathlib import Path
 
-from ._common import FORCE_HELP, HelpFormatter, check_outputs, say
+from ._common import FORCE_HELP, HelpFormatter, check_outputs, say, show_progress
 
 
 def add_parser(sub) -> None:
@@ -18,7 +18,8 @@ def add_parser(sub) -> None:
             "200 Hz) for a sine excitation and a pluck; calibrate that pluck, sample its "
             "damping posterior with emcee, train and test a terrain classifier, and run the "
             "Pi's online loop on an emulated ADS1115. Writes CSVs, TOML records and PNG plots "
-            "to --out."
+            "to --out, the stages' results to stderr, and a summary to stdout (--json: the "
+            "whole summary as JSON)."
         ),
         formatter_class=HelpFormatter,
     )
@@ -30,8 +31,13 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> dict:
-    """Run every stage of the demo; returns its JSON summary."""
+    """Run every stage of the demo; returns its JSON summary (and prints a short one on
+    stdout without ``--json``)."""
     check_outputs({"--out": args.out}, {}, force=args.force, folders=("--out",))
-    from ._demo_stages import run_demo
+    from ._demo_stages import run_demo, summary_lines
 
-    return run_demo(args.out, plots=not args.no_plots, say=say)
+    quiet = not show_progress(args)
+    summary = run_demo(args.out, plots=not args.no_plots, say=(lambda *a: None) if quiet else say)
+    if not args.json:
+        print("\n".join(summary_lines(summary, args.out)), flush=True)
+    return summary

@@ -13,6 +13,7 @@ The demo orchestrates every layer of the library, so its stages live with the co
 7. the Pi's online loop on an emulated ADS1115: sample, classify every 0.5 s, record.
 """
 
+import time
 from pathlib import Path
 
 import jax.numpy as jnp
@@ -22,6 +23,22 @@ from ..fit import dominant_peaks
 from ..io import write_csv
 from ..model import harmonic_steady_state, observe, paper_eq1, paper_record, simulate
 from ._common import interrupts
+from ._common import progress_step as _progress_step
+
+#: Seconds each stage took in the last run (its name → s), for the summary.
+_STAGES: dict[str, float] = {}
+_CLOCK: list = []
+
+
+def progress_step(name: str) -> None:
+    """Start the stage ``name``: on the status line, and timed for the summary."""
+    now = time.perf_counter()
+    if _CLOCK:
+        _STAGES[_CLOCK[0][0]] = round(now - _CLOCK[0][1], 2)
+        _CLOCK.clear()
+    _CLOCK.append((name, now))
+    _progress_step(name)
+
 
 MODAL_CASES = [(hb, fb) for fb in (100.0, 300.0) for hb in (1e-4, 3e-4)]
 
@@ -30,16 +47,19 @@ def run_demo(out: Path, *, plots: bool = True, say=print) -> dict:
     """Run every stage, writing CSVs and PNGs under ``out``; returns a JSON-able summary."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    _STAGES.clear(), _CLOCK.clear()
     record = paper_record()
     whisker = record.whisker()
     coil = record.structure
     f_n = [float(f) for f in whisker.natural_frequencies_hz]
+    progress_step("[1] the paper's whisker")
     say(
         f"[1] {record.name}: EI = {coil.EI:.4g} N m^2, C = {coil.coil_factor:.4g}, "
         f"rho*a = {coil.rho_a:.4g} kg/m"
     )
     say("      natural frequencies (Hz): " + ", ".join(f"{f:.1f}" for f in f_n))
 
+    progress_step("[2] modal analysis")
     say("[2] modal analysis, 1 s at 20 kHz, sensor at x_s = 5 mm (peaks in Hz)")
     t = np.arange(20_000) / 20_000.0
     modal = []
@@ -59,6 +79,7 @@ def run_demo(out: Path, *, plots: bool = True, say=print) -> dict:
             f"paper Eq. 1 {row['paper']['peaks_hz']}, exact steady state {row['exact']['peaks_hz']}"
         )
 
+    progress_step("[3] what the Pi records")
     say("[3] what the Pi records: Hall sensor + ADS1115 (475 SPS) polled at 200 Hz, 5 s")
     recordings = {}
     for label, kwargs in (
@@ -109,6 +130,8 @@ def run_demo(out: Path, *, plots: bool = True, say=print) -> dict:
     summary["posterior"] = _posterior_stage(out, *calibrated, plots=plots, say=say)
     summary["classification"] = _classification_stage(out, plots=plots, say=say)
     summary["stream"] = _stream_stage(out, Path(summary["classification"]["model"]), say=say)
+    progress_step("done")
+    summary["stage_s"] = dict(_STAGES)
     return summary
 
 
@@ -118,6 +141,7 @@ def _calibration_stage(out: Path, record, *, plots: bool, say) -> dict:
 
     from ..fit import Observation, calibrate
 
+    progress_step("[4] calibration")
     say("[4] calibration: a pluck recorded by the ADS1115 at 200 Hz (10 s, SNR 30 dB), fitted")
     say("    from a nominal record 30 % off (start values from the data)")
     sim = simulate(
@@ -162,6 +186,7 @@ def _posterior_stage(out: Path, record, obs, *, plots: bool, say) -> dict:
     """emcee posterior of the calibrated pluck's ζ and f_1 (a short, converged run)."""
     from ..posterior import sample_posterior
 
+    progress_step("[5] posterior (emcee)")
     say("[5] posterior of zeta with emcee: the calibrated pluck, 32 walkers x 1000 steps")
     # 1000 steps: tau is about 11 steps here with the default (differential-evolution)
     # move, and 50 tau is the convergence criterion.
@@ -204,6 +229,7 @@ def _stream_stage(out: Path, model_dir: Path, *, say, terrain: str = "brick") ->
     from ..classify import ClassifierModel
     from ..hw import OnlineClassifier, open_recorder, run_stream, terrain_source
 
+    progress_step("[7] online stream")
     say(f"[7] online stream: emulated ADS1115 fed by the simulator on {terrain} at 0.2 m/s, 10 s")
     clock = hw.FakeClock()
     timing = {"clock": clock.now_ns, "sleep": clock.sleep}
@@ -232,6 +258,7 @@ def _classification_stage(out: Path, *, plots: bool, say) -> dict:
     from ..plot import plot_confusion
     from ..terrain import synthesize_dataset
 
+    progress_step("[6] terrain classification")
     say("[6] terrain classification: 7 simulated terrains at 0.2 m/s, 16 runs x 6 s each")
     # Many short runs rather than a few long ones: what the network needs to see is the
     # run-to-run variation of each terrain (6 runs: 0.68 on held-out runs, 16: 0.94).
@@ -260,3 +287,23 @@ def _classification_stage(out: Path, *, plots: bool, say) -> dict:
         "per_class": res["per_class"],
         "model": str(out / "terrain-model"),
     }
+
+
+def summary_lines(summary: dict, out: Path) -> list[str]:
+    """The demo's results in a few lines (printed on stdout at the end)."""
+    f = summary["natural_frequencies_hz"]
+    cal, post = summary["calibration"], summary["posterior"]
+    cls, stream = summary["classification"], summary["stream"]
+    z = post["zeta"]
+    return [
+        f"whiskerid demo: {summary['whisker']}, outputs in {out}/",
+        f"  natural frequencies: {', '.join(f'{x:.1f}' for x in f[:3])} Hz",
+        f"  calibration ({cal['status']}): f1 = {cal['f1_hz']['value']:.3f} "
+        f"± {cal['f1_hz']['std']:.3f} Hz, zeta = {cal['zeta']['value']:.4f} "
+        f"± {cal['zeta']['std']:.4f}",
+        f"  posterior: zeta = {z['median']:.4f} (68 %: {z['q16']:.4f} to {z['q84']:.4f}), "
+        f"{'converged' if post['converged'] else 'not converged'}",
+        f"  terrain classifier: accuracy {cls['accuracy']:.3f} on held-out recordings",
+        f"  online stream: {stream['fraction_correct']:.0%} of {stream['windows']} windows "
+        "labelled right",
+    ]

@@ -420,7 +420,9 @@ def calibrate_added_mass(
     ok = (bool(res.ok) or gcos < cal_mod.GTOL) and bool(np.all(np.isfinite(np.diag(cov))))
     status = "ok" if ok else ("non-finite" if not np.isfinite(float(res.cost)) else "not converged")
     optimum = problem.unflatten(res.value)
-    per_rec, curves, resid = cal_mod._per_recording(problem, optimum, obs)
+    per_rec, curves, resid = cal_mod._per_recording(
+        problem, optimum, obs, _models(problem, optimum), np.asarray(problem.residuals(optimum))
+    )
     for r, k in zip(per_rec, problem.config_of, strict=True):
         r["added_mass_kg"] = float(problem.added_kg[k])
         r["configuration"] = int(k)
@@ -497,6 +499,19 @@ def calibrate_added_mass(
         covariance=cov,
     )
     out.record = _updated_record(record, out, obs, problem)
+    return out
+
+
+def _models(problem: AddedMassProblem, optimum) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per recording, the normalised model ``D c + g`` and each mode's part of it (what
+    :func:`whiskerid.fit._calibrate._per_recording` reads; the linear calibration gets them
+    from its compiled program)."""
+    nm = problem.n_modes
+    out = []
+    for (D, g), rec in zip(problem.design(optimum), optimum["recs"], strict=True):
+        D, c = np.asarray(D), np.asarray(rec["c"])
+        cols = D[:, 2 : 2 + 2 * nm] * c[2 : 2 + 2 * nm]
+        out.append((D @ c + np.asarray(g), cols[:, :nm] + cols[:, nm:]))
     return out
 
 

@@ -41,12 +41,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import equinox as eqx
-import jax
-import jax.numpy as jnp
 import numpy as np
 
-from .._choices import PINS
+from .._choices import PINS, SOLVERS
 from .._version import __version__
 from ..io import sha256_of
 from ..model import UniformBeam, WhiskerRecord
@@ -59,17 +56,10 @@ from ._checks import (
     residual_peak,
 )
 from ._checks import lag1 as lag1_autocorr
-from ._lsq import gradient_cosine_from, residual_variance, scaled_inverse_gram
+from ._core import fit_problem
 from ._modulus import MODULUS_TOLERANCE, check_tolerance, modulus_covariance
 from ._observation import CalibrationError, Observation, StaticTest
-from ._problem import (
-    FitProblem,
-    reported_names,
-    reported_with_jacobian,
-    residuals_and_jacobian,
-    solve,
-)
-from ._start import start_values
+from ._problem import FitProblem, reported_names
 
 #: A fit is converged when the solver says so, or when no parameter direction has a cosine
 #: with the residuals above this (MINPACK's ``gtol``).
@@ -219,31 +209,26 @@ def calibrate(
     problem = FitProblem.from_observations(
         record, obs, static=static, n_modes=n_modes, zeta_per_mode=zeta_per_mode, pin=pin
     )
-    # Start: grid over (κ, ζ) with the linear coefficients solved exactly.
-    if start is None:
-        theta0 = start_values(problem, obs, nominal, f1_hz=f1_start_hz)
-    else:
-        theta0 = jax.tree_util.tree_map(jnp.asarray, start)
-    res = solve(problem, theta0, solver=solver, max_steps=max_steps)
-    # Weight each block (recording, static test) by its own residual scale, then refit:
-    # the blocks are then combined fairly and s² ≈ 1 (a reduced χ²).
-    problem = problem.reweighted(problem.unflatten(res.value))
-    res = solve(problem, problem.unflatten(res.value), solver=solver, max_steps=max_steps)
-    # One Jacobian at the optimum serves the covariance, the gradient test and the HAC below.
-    resid_w, jac = (np.asarray(a) for a in residuals_and_jacobian(problem, res.value))
-    bread = np.asarray(scaled_inverse_gram(jac))
-    s2 = float(residual_variance(resid_w, res.value.size))
+    # One compiled program (module _core): the start grid over (κ, ζ) with the linear
+    # coefficients solved exactly, the solve, each block (recording, static test) weighted by
+    # its own residual scale (s² ≈ 1, a reduced χ²), and one Jacobian at the optimum for the
+    # covariance, the gradient test and the HAC below.
+    if solver not in SOLVERS:
+        raise CalibrationError(f"solver must be one of {', '.join(SOLVERS)}; got {solver!r}")
+    res = fit_problem(problem, obs, nominal, solver=solver, max_steps=max_steps,
+                      f1_start_hz=f1_start_hz, start=start)  # fmt: skip
+    problem, resid_w, jac, bread, s2 = res.problem, res.resid, res.jac, res.bread, res.s2
     cov = s2 * bread
     # The solver's own test (steps below rtol 1e-10 of every parameter) can stall at
     # rounding level on long real recordings (timestamps rounded to 1 µs: the same optimum,
     # 400 steps); MINPACK's gradient test says whether the point is stationary anyway.
-    gcos = float(gradient_cosine_from(jac, resid_w))
+    gcos = res.gcos
     converged = bool(res.ok) or gcos < GTOL
     ok = converged and bool(np.all(np.isfinite(np.diag(cov))))
     status = "ok" if ok else ("non-finite" if not np.isfinite(float(res.cost)) else "not converged")
 
-    optimum = problem.unflatten(res.value)
-    per_rec, curves, resid = _per_recording(problem, optimum, obs)
+    optimum = res.optimum
+    per_rec, curves, resid = _per_recording(problem, optimum, obs, res.models, resid_w)
     uncertainty = "white noise: s^2 (J^T J)^-1"
     cov_white = cov
     if ok and max(r["lag1_autocorr"] for r in per_rec) > LAG1_MAX:
@@ -254,9 +239,9 @@ def calibrate(
             "1-sigma): the residuals are correlated"
         )
     tol = modulus_tolerance
-    params, corr, fixed, note = _report(record, problem, res.value, cov, static, nominal, tol)
+    params, corr, fixed, note = _report(record, problem, res.reported, cov, static, nominal, tol)
     if cov is not cov_white:
-        white, *_ = _report(record, problem, res.value, cov_white, static, nominal, tol)
+        white, *_ = _report(record, problem, res.reported, cov_white, static, nominal, tol)
         for k in params:
             params[k]["std_white"] = white[k]["std"]
     diagnostics = {
@@ -315,10 +300,10 @@ def _blocks(jac, resid, obs):
     return out
 
 
-def _report(record, problem, flat, cov, static, nominal, modulus_tolerance=0.0):
+def _report(record, problem, reported, cov, static, nominal, modulus_tolerance=0.0):
     structure = record.structure
     pin = problem.pin
-    values, jac = reported_with_jacobian(problem, flat)
+    values, jac = reported
     names = reported_names(problem)
     dcov = np.asarray(jac) @ cov @ np.asarray(jac).T
     if pin == "material" and static is None:  # ρa and C scale with the assumed modulus
@@ -404,13 +389,13 @@ def _poor_fit_warnings(per_rec: list[dict]) -> list[str]:
     ]
 
 
-def _per_recording(problem: FitProblem, optimum, obs):
+def _per_recording(problem: FitProblem, optimum, obs, models, resid):
     """Nuisances and residual diagnostics per recording, the curves for plots, and the
-    weighted residual vector."""
-    designs, resid = _designs_and_residuals(problem, optimum)
+    weighted residual vector (``models``: each recording's normalised model and its modal
+    parts, from the compiled fit)."""
     out, curves = [], []
-    for spec, rec, (D, g), o in zip(problem.recordings, optimum["recs"], designs, obs, strict=True):
-        model_n = np.asarray(D @ rec["c"] + g)
+    for spec, rec, (model_n, modal), o in zip(problem.recordings, optimum["recs"], models, obs,
+                                              strict=True):  # fmt: skip
         y_mean, y_std = float(np.mean(o.y)), float(np.std(o.y))
         model = model_n * y_std + y_mean
         r = o.y - model
@@ -418,8 +403,6 @@ def _per_recording(problem: FitProblem, optimum, obs):
         c = np.asarray(rec["c"])
         nm = problem.n_modes
         amps = np.hypot(c[2 : 2 + nm], c[2 + nm : 2 + 2 * nm]) * y_std
-        cols = np.asarray(D)[:, 2 : 2 + 2 * nm] * c[2 : 2 + 2 * nm]
-        modal = cols[:, :nm] + cols[:, nm:]  # each mode's part of the fitted signal
         modal_rms = [float(v) for v in np.sqrt(np.mean(modal**2, axis=0)) * y_std]
         info = {
             "name": o.name,
@@ -449,11 +432,6 @@ def _per_recording(problem: FitProblem, optimum, obs):
         out.append(info)
         curves.append((o.t, o.y, model))
     return out, curves, np.asarray(resid)
-
-
-@eqx.filter_jit
-def _designs_and_residuals(problem, params):
-    return problem.design(params), problem.residuals(params)
 
 
 def _updated_record(record, cal: Calibration, pin, static, obs, problem):

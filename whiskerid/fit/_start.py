@@ -1,5 +1,10 @@
 """Start values from the data: spectral peaks, aliases unfolded, envelope decay, release time,
-and the grid over ``(κ, ζ)`` with the linear coefficients solved exactly (variable projection)."""
+and the grid over ``(κ, ζ)`` with the linear coefficients solved exactly (variable projection).
+
+The grid is built from the data in NumPy (:func:`start_grid`: a fixed number of points, so
+that one compiled program serves every recording) and searched inside the calibration's
+compiled program (:func:`start_from_grid`, traceable); :func:`start_values` runs both.
+"""
 
 import itertools
 import math
@@ -72,14 +77,186 @@ def envelope_zeta(t: np.ndarray, y: np.ndarray, f_obs_hz: float, f_true_hz: floa
 
 # --------------------------------------------------------------------------- start grid
 _MAX_PROFILE_SAMPLES = 6000
-
-
-_GRID_CHUNK = 64
+#: Candidate f_1 of the start search (beyond are dropped, padding is never chosen): 17
+#: geometric steps plus each decay recording's spectral peaks and their aliases.
+F_POINTS = 48
+#: Candidate ζ in the second stage of the search: the record's ×¼…×4 and the envelopes'.
+Z_POINTS = 12
+#: f_1 candidates (the best of the first stage) whose ζ is searched in the second.
+_REFINED = 4
+#: Grid points profiled at once (vectorised) inside the sequential map over the grid.
+_GRID_BATCH = 16
+#: Relative cost within which grid points count as equally good (aliases of each other).
+_NEAR = 1.02
+#: Relative cost within which the mirror below the Nyquist frequency of a line above it is
+#: preferred (see :func:`start_from_grid`).
+_MIRROR = 1.5
 
 
 def _kappa_from_f1(nominal: Whisker, f1_hz):
-    beta1, length = float(nominal.beta[0]), float(nominal.length_m)
+    beta1, length = float(np.asarray(nominal.beta)[0]), float(nominal.length_m)
     return (2 * np.pi * np.asarray(f1_hz) * length**2 / beta1**2) ** 2
+
+
+def profile_steps(problem: FitProblem) -> tuple[int, ...]:
+    """Every how many samples each recording is profiled on the grid (at most ~6000 samples
+    a recording: the model is evaluated at the same instants, so decimation aliases model and
+    data alike)."""
+    return tuple(max(1, math.ceil(r.t.shape[0] / _MAX_PROFILE_SAMPLES)) for r in problem.recordings)
+
+
+def start_grid(
+    problem: FitProblem,
+    observations: list[Observation],
+    nominal: Whisker,
+    *,
+    f1_hz: float | None = None,
+) -> dict[str, np.ndarray]:
+    """The start grid over ``(κ, ζ)``, seeded by the data, as arrays of fixed sizes.
+
+    f_1 is searched within a factor 2.5 of the nominal (``f1_hz``, else the record's): 17
+    geometric steps (12 % apart) plus the spectral peaks of every free decay, each as the
+    line itself and with its aliases unfolded (:func:`unalias`); ζ among the record's (×¼…×4)
+    and the envelopes' decay rates (see :func:`start_from_grid` for the two stages).
+
+    Returns:
+        ``f_hz`` and ``log_kappa`` of each f_1 candidate and ``f_valid`` (0 for padding);
+        ``zeta1``, the two ζ of the first stage (the record's and the envelopes' median);
+        ``zeta`` and ``z_valid``, the second stage's;
+        ``f_ref_hz`` (the centre of the search), ``nyquist_hz`` (of the fastest free-decay
+        recording; infinite without one), ``prefer_baseband`` (1 unless ``f1_hz`` was given:
+        see :func:`start_from_grid`), ``log_ei`` and ``static_d0`` (a static test's start).
+    """
+    # (NumPy from here: indexing a JAX array would compile a program in a fresh process)
+    f1_nom = f1_hz or float(np.asarray(nominal.natural_frequencies_hz)[0])
+    zeta_nom = float(np.mean(np.asarray(nominal.zeta)))
+    # At low sample rates a higher mode can alias onto the first (e.g. f_2 = 645 Hz folds to
+    # 45 Hz at 200 Hz): each candidate is judged by the cost of the whole multi-mode model.
+    lo, hi = f1_nom / 2.5, f1_nom * 2.5
+    f_cands = list(f1_nom * np.geomspace(1 / 2.5, 2.5, 17))
+    z_cands = [zeta_nom * k for k in (0.25, 0.5, 1.0, 2.0, 4.0)]
+    nyquist = np.inf
+    for o in observations:
+        if o.excitation != "decay":
+            continue
+        # Both windows: a pluck that dies out within the first few percent of the record is
+        # below the noise in the Hann-windowed spectrum (the start then rested on the grid
+        # alone and picked an aliased higher mode in 5 of 200 seeded trials).
+        yc = o.y - np.median(o.y)
+        peaks, rate = spectral_peaks(o.t, yc)
+        peaks = peaks + spectral_peaks(o.t, yc, window="none")[0]
+        nyquist = rate / 2 if not np.isfinite(nyquist) else max(nyquist, rate / 2)
+        for fp in peaks:
+            # the alias nearest the nominal, and the line itself (below the Nyquist frequency)
+            f_true = unalias(fp, rate, f1_nom)
+            f_cands.extend(f for f in {f_true, fp} if lo <= f <= hi)
+            z = envelope_zeta(o.t, o.y, fp, f_true) if lo <= f_true <= hi else None
+            if z is not None:
+                z_cands.append(z)
+    # The record's five ζ, then the envelopes' in order; as many f_1 as fit.
+    envelopes = z_cands[5:]
+    zeta1 = [zeta_nom, float(np.median(envelopes)) if envelopes else 2 * zeta_nom]
+    z_cands = np.clip(np.unique(np.round(z_cands[:Z_POINTS], 6)), 1e-4, 0.5)
+    f_cands = np.asarray(f_cands)[:F_POINTS]
+    pad_f, pad_z = F_POINTS - f_cands.size, Z_POINTS - z_cands.size
+    log_ei, d0 = math.log(float(nominal.EI)), 0.0
+    if problem.fit_ei:
+        fit = np.asarray(problem.static_test.line_fit)
+        x, l = float(problem.static_test.x_m), float(problem.length_m)
+        ei = (x**2 * (3 * l - x) / 6) / fit[1] if fit[1] > 0 else float(nominal.EI)
+        log_ei, d0 = math.log(ei), float(fit[0])
+    return {
+        "log_kappa": np.pad(np.log(_kappa_from_f1(nominal, f_cands)), (0, pad_f), mode="edge"),
+        "f_hz": np.pad(f_cands, (0, pad_f), mode="edge"),
+        "f_valid": np.pad(np.ones(f_cands.size), (0, pad_f)),
+        "zeta1": np.clip(np.asarray(zeta1), 1e-4, 0.5),
+        "zeta": np.pad(z_cands, (0, pad_z), mode="edge"),
+        "z_valid": np.pad(np.ones(z_cands.size), (0, pad_z)),
+        "f_ref_hz": np.asarray(f1_nom),
+        "nyquist_hz": np.asarray(nyquist),
+        "prefer_baseband": np.asarray(0.0 if f1_hz else 1.0),
+        "log_ei": np.asarray(log_ei),
+        "static_d0": np.asarray(d0),
+    }
+
+
+def start_from_grid(problem: FitProblem, grid: dict, masks=None) -> dict:
+    """The start parameters from :func:`start_grid` (traceable): the grid point of least
+    profile cost, with the linear coefficients solved exactly there.
+
+    Two stages: every f_1 candidate with the first stage's two ζ, then the four best f_1
+    with every ζ candidate (the profile cost of a decay depends on ζ far less than on f_1,
+    so the full product is not needed). Among points within 2 % of the least cost (a line
+    and its alias fit alike), the one nearest the centre of the search, preferring those
+    below the Nyquist frequency of the free decays unless f_1 was given
+    (``prefer_baseband``): a sampling rate is chosen to resolve f_1, and a record's f_1 may
+    well be 30 % off, which puts a line near the Nyquist frequency closer to its alias. For
+    the same reason a line above the Nyquist frequency gives way to its mirror below it
+    when the mirror's profile cost is within 50 % (the grid's f_1 are a few tenths of a hertz
+    off the line, which moves the two costs apart by up to about 25 %).
+
+    Args:
+        problem: The fit problem.
+        grid: From :func:`start_grid`.
+        masks: Per recording, 1 for a sample and 0 for padding (None: no padding).
+    """
+    steps = profile_steps(problem)
+    if masks is None:
+        masks = [jnp.ones(r.t.shape[0]) for r in problem.recordings]
+
+    def costs(log_kappa, zeta, valid):
+        zu = _lsq.from_interval(zeta, 0.0, ZETA_MAX)
+        c = jax.lax.map(
+            lambda p: _profile_cost(problem, steps, masks, p[0], p[1], grid["log_ei"]),
+            (log_kappa, zu),
+            batch_size=_GRID_BATCH,
+        )
+        return jnp.where((valid > 0) & jnp.isfinite(c), c, jnp.inf), zu
+
+    nf, nz = grid["f_hz"].shape[0], grid["zeta"].shape[0]
+    # stage 1: every f_1 with two ζ
+    lk1 = jnp.repeat(grid["log_kappa"], 2)
+    f1 = jnp.repeat(grid["f_hz"], 2)
+    c1, zu1 = costs(lk1, jnp.tile(grid["zeta1"], nf), jnp.repeat(grid["f_valid"], 2))
+    # stage 2: the best f_1 with every ζ
+    top = jnp.argsort(jnp.min(c1.reshape(nf, 2), axis=1))[:_REFINED]
+    lk2 = jnp.repeat(grid["log_kappa"][top], nz)
+    f2 = jnp.repeat(grid["f_hz"][top], nz)
+    valid2 = jnp.repeat(grid["f_valid"][top], nz) * jnp.tile(grid["z_valid"], _REFINED)
+    c2, zu2 = costs(lk2, jnp.tile(grid["zeta"], _REFINED), valid2)
+    cost, f_hz = jnp.concatenate([c1, c2]), jnp.concatenate([f1, f2])
+    log_kappa, zeta_u = jnp.concatenate([lk1, lk2]), jnp.concatenate([zu1, zu2])
+    near = cost <= jnp.min(cost) * _NEAR + 1e-300
+    below = f_hz <= grid["nyquist_hz"]
+    shun = (grid["prefer_baseband"] > 0) & jnp.any(near & below) & ~below
+    score = jnp.abs(jnp.log(f_hz / grid["f_ref_hz"])) + jnp.where(shun, 1e3, 0.0)
+    best = jnp.argmin(jnp.where(near, score, jnp.inf))
+    # A line above the Nyquist frequency and its mirror below it differ in the samples only
+    # through the weaker higher modes, which on a grid (f_1 a few tenths of a hertz off) can
+    # favour either by tens of percent: the mirror is taken if it is within _MIRROR.
+    mirror = 2 * grid["nyquist_hz"] - f_hz[best]
+    is_mirror = (jnp.abs(f_hz - mirror) <= 5e-3 * mirror) & (f_hz <= grid["nyquist_hz"])
+    is_mirror = is_mirror & (cost <= cost[best] * _MIRROR)
+    use = (grid["prefer_baseband"] > 0) & (f_hz[best] > grid["nyquist_hz"]) & jnp.any(is_mirror)
+    best = jnp.where(use, jnp.argmin(jnp.where(is_mirror, cost, jnp.inf)), best)
+    theta = jax.tree_util.tree_map(jnp.asarray, problem.zero_params())
+    theta["log_kappa"] = log_kappa[best]
+    theta["zeta_u"] = jnp.full(jnp.shape(theta["zeta_u"]), zeta_u[best])
+    if problem.fit_ei:
+        theta["log_EI"] = grid["log_ei"]
+        theta["static_d0"] = grid["static_d0"]
+    designs = [D for D, _ in problem.design(theta, profile=True)]
+    for r, rp, D, m in zip(problem.recordings, theta["recs"], designs, masks, strict=True):
+        coef = jnp.linalg.lstsq(D * m[:, None], r.y * m)[0]
+        if r.forced == "known" and r.excitation == "sine":
+            # Coefficients of the unit-RMS columns W(t), W(t − T/4): c1 W(t) + c2 W(t − T/4)
+            # = R W(t − ψ/ω_b) with ψ = atan2(c2, c1).
+            rp["tau"] = jnp.arctan2(coef[-1], coef[-2]) / (2 * jnp.pi * r.fb_hz)
+            coef = coef[:-2]
+        elif r.forced == "known":  # base motion: its free column only served the start
+            coef = coef[:-1]
+        rp["c"] = coef
+    return theta
 
 
 def start_values(
@@ -90,7 +267,7 @@ def start_values(
     f1_hz: float | None = None,
 ) -> dict:
     """Start parameters: the best ``(κ, ζ)`` on a grid seeded by the data, with the linear
-    coefficients solved exactly there.
+    coefficients solved exactly there (:func:`start_grid`, then :func:`start_from_grid`).
 
     Args:
         problem: The fit problem.
@@ -98,114 +275,25 @@ def start_values(
         nominal: The record's whisker with the problem's number of modes.
         f1_hz: Centre of the search (the nominal f_1 by default).
     """
-    f1_nom = f1_hz or float(nominal.natural_frequencies_hz[0])
-    zeta_nom = float(np.mean(nominal.zeta))
-    # f_1 is searched within a factor 2.5 of the nominal (a whisker's f_1 may be half or
-    # twice its record's). At low sample rates a higher mode can alias onto the first
-    # (e.g. f_2 = 645 Hz folds to 45 Hz at 200 Hz): each candidate is judged by the cost of
-    # the whole multi-mode model, and near-ties are broken towards the nominal below.
-    lo, hi = f1_nom / 2.5, f1_nom * 2.5
-    f_cands = list(f1_nom * np.geomspace(1 / 2.5, 2.5, 33))
-    z_cands = [zeta_nom * k for k in (0.25, 0.5, 1.0, 2.0, 4.0)]
-    for o in observations:
-        if o.excitation != "decay":
-            continue
-        # Both windows: a pluck that dies out within the first few percent of the record is
-        # below the noise in the Hann-windowed spectrum (the start then rested on the grid
-        # alone and picked an aliased higher mode in 5 of 200 seeded trials).
-        yc = o.y - np.median(o.y)
-        peaks, rate = spectral_peaks(o.t, yc)
-        peaks = peaks + spectral_peaks(o.t, yc, window="none")[0]
-        for fp in peaks:
-            f_true = unalias(fp, rate, f1_nom)
-            if not lo <= f_true <= hi:
-                continue
-            f_cands.append(f_true)
-            z = envelope_zeta(o.t, o.y, fp, f_true)
-            if z is not None:
-                z_cands.append(z)
-    z_cands = np.clip(np.unique(np.round(z_cands, 6)), 1e-4, 0.5)
-    f_cands = np.asarray(f_cands)
-    grid_f = np.repeat(f_cands, z_cands.size)
-    grid_z = np.tile(z_cands, f_cands.size)
-    # Profile on at most ~6000 samples per recording (every k-th sample: the model is
-    # evaluated at the same instants, so decimation aliases model and data alike).
-    steps = tuple(
-        max(1, math.ceil(r.t.shape[0] / _MAX_PROFILE_SAMPLES)) for r in problem.recordings
-    )
-    log_kappa = np.log(_kappa_from_f1(nominal, grid_f))
-    log_ei0 = math.log(float(nominal.EI))
-    # The grid's length varies with the data: it is evaluated in chunks of a fixed length
-    # (the last one padded), so that one compiled function serves every grid.
-    n_grid = grid_f.size
-    pad = -n_grid % _GRID_CHUNK
-    log_kappa_p = np.pad(log_kappa, (0, pad), mode="edge")
-    grid_z_p = np.pad(grid_z, (0, pad), mode="edge")
-    costs, zeta_u = [], []
-    for k in range(0, n_grid + pad, _GRID_CHUNK):
-        chunk = slice(k, k + _GRID_CHUNK)
-        c, z = _profile_grid(
-            problem,
-            steps,
-            jnp.asarray(log_kappa_p[chunk]),
-            jnp.asarray(grid_z_p[chunk]),
-            jnp.asarray(log_ei0),
-        )
-        costs.append(np.asarray(c))
-        zeta_u.append(np.asarray(z))
-    costs = np.concatenate(costs)[:n_grid]
-    zeta_u = np.concatenate(zeta_u)[:n_grid]
-    costs = np.where(np.isfinite(costs), costs, np.inf)
-    # Among (near-)equally good candidates take the one closest to the nominal f_1.
-    near = np.flatnonzero(costs <= costs.min() * 1.02 + 1e-300)
-    best = int(near[np.argmin(np.abs(np.log(grid_f[near] / f1_nom)))])
-    theta = problem.zero_params()
-    theta["log_kappa"] = np.asarray(log_kappa[best])
-    theta["zeta_u"] = np.full(np.shape(theta["zeta_u"]), zeta_u[best])
-    if problem.fit_ei:
-        fit = np.asarray(problem.static_test.line_fit)
-        x, l = float(problem.static_test.x_m), float(problem.length_m)
-        ei = (x**2 * (3 * l - x) / 6) / fit[1] if fit[1] > 0 else float(nominal.EI)
-        theta["log_EI"] = np.asarray(math.log(ei))
-        theta["static_d0"] = np.asarray(float(fit[0]))
-    designs = _profile_design(problem, theta)
-    for r, rp, D in zip(problem.recordings, theta["recs"], designs, strict=True):
-        coef = np.linalg.lstsq(np.asarray(D), np.asarray(r.y), rcond=None)[0]
-        if r.forced == "known" and r.excitation == "sine":
-            # Coefficients of the unit-RMS columns W(t), W(t − T/4): c1 W(t) + c2 W(t − T/4)
-            # = R W(t − ψ/ω_b) with ψ = atan2(c2, c1).
-            c1, c2 = coef[-2:]
-            rp["tau"] = np.asarray(math.atan2(c2, c1) / (2 * np.pi * float(r.fb_hz)))
-            coef = coef[:-2]
-        elif r.forced == "known":  # base motion: its free column only served the start
-            coef = coef[:-1]
-        rp["c"] = np.asarray(coef)
-    return jax.tree_util.tree_map(jnp.asarray, theta)
+    grid = start_grid(problem, observations, nominal, f1_hz=f1_hz)
+    return _start_jit(problem, jax.tree_util.tree_map(jnp.asarray, grid))
 
 
 @eqx.filter_jit
-def _profile_design(problem, theta):
-    return [D for D, _ in problem.design(theta, profile=True)]
+def _start_jit(problem, grid):
+    return start_from_grid(problem, grid)
 
 
-@eqx.filter_jit
-def _profile_grid(problem, steps, log_kappa, zeta, log_ei):
-    """Profile cost at each grid point, and the grid's ζ in the fitted (logistic) space."""
-    zeta_u = _lsq.from_interval(zeta, 0.0, ZETA_MAX)
-    costs = jax.lax.map(
-        lambda xz: _profile_cost(problem, steps, xz[0], xz[1], log_ei), (log_kappa, zeta_u)
-    )
-    return costs, zeta_u
-
-
-def _profile_cost(problem, steps, log_kappa, zeta_u, log_ei):
+def _profile_cost(problem, steps, masks, log_kappa, zeta_u, log_ei):
     theta = {"log_kappa": log_kappa, "zeta_u": zeta_u, "log_EI": log_ei}
     w = problem.whisker(theta)
     total = 0.0
-    for r, step in zip(problem.recordings, steps, strict=True):
+    for r, step, m in zip(problem.recordings, steps, masks, strict=True):
         if r.excitation != "base":  # base motion needs every step of its input
             r = eqx.tree_at(lambda q: (q.t, q.y), r, (r.t[::step], r.y[::step]))
+            m = m[::step]
         D, _ = recording_design(r, w, {"tau": 0.0}, profile=True)
+        D = D * m[:, None]  # padding (zero weight) out of the normal equations
         # Normal equations on unit-norm columns (a tiny ridge for a vanished column):
         # jnp.linalg.lstsq here (an SVD) made XLA re-evaluate the design several times.
         norm = jnp.sqrt(jnp.sum(D**2, axis=0)) + 1e-300
@@ -213,7 +301,7 @@ def _profile_cost(problem, steps, log_kappa, zeta_u, log_ei):
         gram = Dn.T @ Dn + 1e-12 * jnp.eye(D.shape[1])
         k = D.shape[1]
         L = _lsq.cholesky_small([[gram[i, j] for j in range(i + 1)] for i in range(k)])
-        coef = jnp.stack(_lsq.cho_solve_small(L, list(Dn.T @ r.y)))
-        res = Dn @ coef - r.y
-        total = total + jnp.mean(res**2)
+        coef = jnp.stack(_lsq.cho_solve_small(L, list(Dn.T @ (r.y * m))))
+        res = (Dn @ coef - r.y) * m
+        total = total + jnp.sum(res**2) / jnp.sum(m)
     return total

@@ -1,0 +1,184 @@
+"""Programs compiled once per machine: exported on disk, executables in JAX's persistent cache.
+
+A calibration is one compiled program per structure and shape bucket (module ``_core``).
+Calling a jitted function in a fresh interpreter traces it and lowers it to StableHLO before
+JAX's persistent compilation cache can even be asked for the executable: about a second for
+the calibration's solver, every run. Here the lowered program is kept instead, as a
+``jax.export`` artefact (a versioned flatbuffer, no pickle) in ``programs/`` of the cache
+folder (:func:`whiskerid._compile_cache.cache_dir`), under a key made of everything the
+program depends on: the program's name and static options, the structure and shapes of its
+arguments, the versions of JAX, jaxlib, equinox, optimistix and lineax, the float64 switch,
+the backend, and a digest of the source of whiskerid's ``fit``, ``model`` and ``io``. A
+later run reads the artefact (milliseconds), wraps it in a trivial jitted call and gets the
+executable from JAX's persistent compilation cache in the same folder: nothing is traced or
+lowered again.
+
+The command line points JAX's cache at that folder before JAX starts. A user's program that
+has not configured a JAX cache of its own gets the same folder for these programs only: it is
+switched on around their compilation and off again, so that nothing else the program compiles
+is cached behind its back. ``WHISKERID_COMPILE_CACHE=off`` switches all of it off (programs
+are then exported and compiled once per process).
+"""
+
+import contextlib
+import hashlib
+import importlib.metadata
+import json
+import os
+from collections.abc import Callable
+from pathlib import Path
+
+import jax
+import numpy as np
+
+from .._compile_cache import cache_dir
+
+#: Compiled programs of this process, by key.
+_PROGRAMS: dict[str, Callable] = {}
+_ENVIRONMENT: list[str] = []
+_DEPENDENCIES = ("jax", "jaxlib", "equinox", "optimistix", "lineax")
+
+
+def cached_call(name: str, fn: Callable, args: tuple, *, static: tuple = ()):
+    """``fn(*args)`` through a program compiled once per machine (see the module docstring).
+
+    Args:
+        name: The program's name (part of its key).
+        fn: A function of arrays only (its static options bound, e.g. by
+            :func:`functools.partial`) returning a dict of arrays.
+        args: Its arguments: pytrees of arrays; their structure (static fields of
+            equinox modules included) and the leaves' shapes and dtypes select the program.
+        static: The options bound into ``fn`` (JSON-able), part of the key.
+
+    Returns:
+        The dict ``fn`` returns, as arrays.
+    """
+    leaves, treedef = jax.tree_util.tree_flatten(args)
+    # Host arrays of canonical, strong dtypes: the program's key does not depend on where an
+    # argument came from (a weakly typed scalar, a Python float, a NumPy array).
+    leaves = [np.asarray(x, dtype=_canonical(x)) for x in leaves]
+    key = program_key(name, treedef, leaves, static)
+    program = _PROGRAMS.get(key)
+    if program is None:
+        program = _PROGRAMS[key] = _load_or_build(key, fn, treedef, leaves)
+    return program(leaves)
+
+
+def program_key(name: str, treedef, leaves: list, static: tuple) -> str:
+    """The key of a program: SHA-256 of everything its compiled code depends on."""
+    parts = {
+        "name": name,
+        "static": repr(static),
+        "tree": str(treedef),
+        "leaves": [(list(x.shape), str(x.dtype)) for x in leaves],
+        "environment": _environment(),
+    }
+    return hashlib.sha256(json.dumps(parts, sort_keys=True).encode()).hexdigest()[:32]
+
+
+def _canonical(x):
+    dtype = np.dtype(x.dtype) if hasattr(x, "dtype") else np.result_type(x)
+    if dtype.kind == "f":
+        return np.float64
+    if dtype.kind in "iu":
+        return np.int64
+    return dtype
+
+
+def _environment() -> list[str]:
+    """Versions, the float64 switch, the backend and a digest of whiskerid's source."""
+    if not _ENVIRONMENT:
+        versions = []
+        for dist in _DEPENDENCIES:
+            try:
+                versions.append(f"{dist}={importlib.metadata.version(dist)}")
+            except importlib.metadata.PackageNotFoundError:
+                versions.append(f"{dist}=?")
+        digest = hashlib.sha256()
+        package = Path(__file__).resolve().parents[1]
+        # What a fit program is made of: the fit and model packages and the package's own
+        # top-level modules (the command line and the other packages are not in it).
+        sources = [*package.glob("*.py"), *(package / "fit").rglob("*.py"),
+                   *(package / "model").rglob("*.py"), *(package / "io").rglob("*.py")]  # fmt: skip
+        for path in sorted(sources):
+            digest.update(str(path.relative_to(package)).encode())
+            digest.update(path.read_bytes())
+        _ENVIRONMENT.extend([
+            *versions,
+            f"x64={jax.config.jax_enable_x64}",
+            f"backend={jax.default_backend()}",
+            f"source={digest.hexdigest()}",
+        ])  # fmt: skip
+    return _ENVIRONMENT
+
+
+def _load_or_build(key: str, fn: Callable, treedef, leaves: list) -> Callable:
+    from jax import export
+
+    folder = cache_dir()
+    path = None if folder is None else folder / "programs" / f"{key}.jaxexport"
+    exported = None
+    if path is not None and path.is_file():
+        try:
+            exported = export.deserialize(bytearray(path.read_bytes()))
+        except Exception:  # a torn or foreign file: build it again
+            exported = None
+    if exported is None:
+
+        def flat(leaves):
+            return fn(*jax.tree_util.tree_unflatten(treedef, leaves))
+
+        # Every custom call (LAPACK on the CPU) is allowed: an artefact is only ever loaded by
+        # the same versions of JAX and jaxlib (they are part of its key).
+        allow = [export.DisabledSafetyCheck.custom_call("ALL")]
+        exported = export.export(jax.jit(flat), disabled_checks=allow)(leaves)
+        if path is not None:
+            _write(path, exported.serialize())
+    with _persistent_cache(folder):
+        return jax.jit(exported.call).lower(leaves).compile()
+
+
+def _write(path: Path, data: bytes) -> None:
+    """Write ``data`` whole or not at all (a reader never sees half a file)."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        tmp.write_bytes(data)
+        os.replace(tmp, path)
+    except OSError:
+        pass  # a read-only or full cache: the program still runs, it is just not kept
+
+
+@contextlib.contextmanager
+def _persistent_cache(folder: Path | None):
+    """JAX's persistent compilation cache in ``folder`` while compiling, unless JAX already
+    has one (the command line's, or the user's own) or the cache is off."""
+    from jax.experimental.compilation_cache import compilation_cache as cc
+
+    if (
+        folder is None
+        or jax.config.jax_compilation_cache_dir
+        or not jax.config.values.get("jax_enable_compilation_cache", True)
+    ):
+        yield
+        return
+    options = {
+        "jax_compilation_cache_dir": str(folder),
+        "jax_persistent_cache_min_compile_time_secs": 0.0,
+        "jax_persistent_cache_min_entry_size_bytes": 0,
+    }
+    before = {k: jax.config.values[k] for k in options}
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        yield
+        return
+    for k, v in options.items():
+        jax.config.update(k, v)
+    cc.reset_cache()
+    try:
+        yield
+    finally:
+        for k, v in before.items():
+            jax.config.update(k, v)
+        cc.reset_cache()

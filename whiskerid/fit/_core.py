@@ -1,0 +1,279 @@
+"""The numbers of a calibration as one compiled program, per structure and shape bucket.
+
+From the start grid to the covariance, everything a calibration computes with JAX is one
+traced function (:func:`fit_core`): the profile cost over the start grid and the best point
+(module ``_start``), the least squares (optimistix), the weight of each block (recording,
+static test) from its own residual scale and, with more than one block, the second solve,
+the residuals and Jacobian at the optimum, ``(JᵀJ)⁻¹`` through the SVD, ``s²``, MINPACK's
+gradient test, each recording's fitted curve and modal parts, and the reported quantities
+with their Jacobian. One program is traced, lowered and compiled once per machine (module
+``_aot``), instead of dozens of small ones per process.
+
+Shape buckets: a free-decay recording is padded to the next of 64·2^k·(1, 1.25, 1.5, 1.75)
+samples with zero-weight samples (its last instant repeated, so the design's time span is the
+recording's own), so recordings of 5 s and 6 s share a program; the padding enters no sum,
+no cost and no count (its residuals and Jacobian rows are zero and ``s²`` divides by the real
+number of samples). Sine and base-motion recordings keep their length (their forced columns
+are normalised over the whole record).
+"""
+
+import functools
+import math
+from dataclasses import dataclass
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import _lsq as _lsq
+from ._aot import cached_call
+from ._problem import FitProblem, recording_design
+from ._start import start_from_grid, start_grid
+
+_BUCKET_STEPS = (1.0, 1.25, 1.5, 1.75)
+#: The solver's tolerances (steps below ``atol + rtol·|θ|`` in every parameter). Tighter ones
+#: only add steps at rounding level (a 2000-sample pluck: 10 steps at 1e-8, 13 to 24 at
+#: 1e-10, to the same optimum within 1e-16); 1e-8 of f_1 is far below its 1σ.
+RTOL, ATOL = 1e-8, 1e-10
+
+
+def bucket(n: int) -> int:
+    """The padded length of a recording of ``n`` samples (at most 25 % more, at least 64)."""
+    if n <= 64:
+        return 64
+    k = math.floor(math.log2(n / 64))
+    for base in (64 * 2**k, 64 * 2 ** (k + 1)):
+        for s in _BUCKET_STEPS:
+            if round(base * s) >= n:
+                return round(base * s)
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
+@dataclass
+class CoreResult:
+    """What :func:`fit_problem` returns, in NumPy, with the padding removed.
+
+    Attributes:
+        value: Flat parameters at the optimum.
+        optimum: The same as a parameter pytree (NumPy).
+        ok: Whether the solver reported success (last pass).
+        steps: Solver steps (last pass).
+        cost: Half the weighted sum of squares at the optimum.
+        problem: The problem with each block weighted by its own residual scale.
+        resid: Weighted residuals at the optimum, recordings then the static test.
+        jac: Their Jacobian in the flat parameters.
+        bread: ``(JᵀJ)⁻¹`` (see :func:`whiskerid.fit.covariance`).
+        s2: Residual variance ``‖r‖²/(n − p)``.
+        gcos: MINPACK's gradient cosine at the optimum.
+        models: Per recording, the normalised model ``D c + g`` and its modal parts
+            ``(n, n_modes)``.
+        reported: The reported quantities (:meth:`FitProblem.reported`) as a vector, and
+            their Jacobian in the flat parameters.
+    """
+
+    value: np.ndarray
+    optimum: dict
+    ok: bool
+    steps: int
+    cost: float
+    problem: FitProblem
+    resid: np.ndarray
+    jac: np.ndarray
+    bread: np.ndarray
+    s2: float
+    gcos: float
+    models: list[tuple[np.ndarray, np.ndarray]]
+    reported: tuple[np.ndarray, np.ndarray]
+
+
+def fit_problem(
+    problem: FitProblem,
+    observations,
+    nominal,
+    *,
+    solver: str,
+    max_steps: int,
+    f1_start_hz: float | None = None,
+    start: dict | None = None,
+) -> CoreResult:
+    """Start values, least squares, weights, covariance and reported values of ``problem``
+    in one compiled program (see the module docstring).
+
+    Args:
+        problem: The fit problem (unpadded).
+        observations: Its recordings (the start grid reads their spectra).
+        nominal: The record's whisker with the problem's number of modes.
+        solver: Least-squares solver name.
+        max_steps: Solver step limit.
+        f1_start_hz: Centre of the start search (the record's f_1 when None).
+        start: Start parameters instead of the grid search (a parameter pytree).
+    """
+    sizes = [r.t.shape[0] for r in problem.recordings]
+    padded, masks = _padded(problem)
+    if start is None:
+        first = start_grid(problem, observations, nominal, f1_hz=f1_start_hz)
+    else:
+        first = {"flat0": np.asarray(problem.flatten(start))}
+    fn = functools.partial(fit_core, solver=solver, max_steps=max_steps)
+    out = cached_call("calibrate", fn, (padded, masks, first), static=(solver, max_steps))
+    out = {k: np.asarray(v) for k, v in out.items()}
+    rows = _rows(sizes, [m.size for m in masks], out["resid"].size)
+    weights = [np.asarray(w) for w in out["weights"]]
+    reweighted = eqx.tree_at(lambda q: [r.weight for r in q.recordings], problem, weights)
+    models = [(out[f"model_{i}"][:n], out[f"modal_{i}"][:n]) for i, n in enumerate(sizes)]
+    return CoreResult(
+        value=out["value"],
+        optimum=unflatten_numpy(problem, out["value"]),
+        ok=bool(out["ok"]),
+        steps=int(out["steps"]),
+        cost=float(out["cost"]),
+        problem=reweighted,
+        resid=out["resid"][rows],
+        jac=out["jac"][rows],
+        bread=out["bread"],
+        s2=float(out["s2"]),
+        gcos=float(out["gcos"]),
+        models=models,
+        reported=(out["reported"], out["reported_jac"]),
+    )
+
+
+def unflatten_numpy(problem: FitProblem, flat: np.ndarray) -> dict:
+    """:meth:`FitProblem.unflatten` in NumPy (JAX's would compile a few programs in a fresh
+    process; the layout is the same: leaves in tree order, each raveled)."""
+    leaves, treedef = jax.tree_util.tree_flatten(problem.zero_params())
+    parts, start = [], 0
+    for leaf in leaves:
+        size = int(np.size(leaf))
+        parts.append(np.asarray(flat[start : start + size]).reshape(np.shape(leaf)))
+        start += size
+    return jax.tree_util.tree_unflatten(treedef, parts)
+
+
+def _padded(problem: FitProblem):
+    """The problem with every free decay padded to its bucket, and the masks (1 = sample)."""
+    recs, masks = [], []
+    for r in problem.recordings:
+        n = r.t.shape[0]
+        size = bucket(n) if r.excitation == "decay" else n
+        pad = size - n
+        t, y = np.asarray(r.t), np.asarray(r.y)
+        if pad:
+            t = np.concatenate([t, np.full(pad, t[-1])])
+            y = np.concatenate([y, np.zeros(pad)])
+            r = eqx.tree_at(lambda q: (q.t, q.y), r, (t, y))
+        recs.append(r)
+        masks.append(np.concatenate([np.ones(n), np.zeros(pad)]))
+    return eqx.tree_at(lambda q: q.recordings, problem, tuple(recs)), masks
+
+
+def _rows(sizes, padded_sizes, total) -> np.ndarray:
+    """Indices of the real rows (samples, then the static test's) of a padded residual."""
+    idx, start = [], 0
+    for n, size in zip(sizes, padded_sizes, strict=True):
+        idx.append(np.arange(start, start + n))
+        start += size
+    idx.append(np.arange(start, total))
+    return np.concatenate(idx)
+
+
+def _mask_vector(problem, masks):
+    parts = list(masks)
+    if problem.static_test is not None:
+        parts.append(jnp.ones(problem.static_test.force.shape[0]))
+    return jnp.concatenate(parts)
+
+
+def _masked_residuals(flat, args):
+    problem, mask = args
+    return problem.residuals(problem.unflatten(flat)) * mask
+
+
+def _block_weights(problem, params, masks):
+    """``1/σ`` of each recording's own residuals at ``params`` (σ² = RSS/(n − columns))."""
+    weights = []
+    for (D, g), r, p, m in zip(
+        problem.design(params), problem.recordings, params["recs"], masks, strict=True
+    ):
+        res = (D @ p["c"] + g - r.y) * m
+        dof = jnp.maximum(jnp.sum(m) - D.shape[1], 1.0)
+        weights.append(1.0 / jnp.maximum(jnp.sqrt(jnp.sum(res**2) / dof), 1e-12))
+    return jnp.stack(weights)
+
+
+def _weighted(problem, weights):
+    return eqx.tree_at(
+        lambda q: [r.weight for r in q.recordings],
+        problem,
+        [weights[i] for i in range(len(problem.recordings))],
+    )
+
+
+def fit_core(problem: FitProblem, masks, first: dict, *, solver: str, max_steps: int) -> dict:
+    """Everything a calibration computes with JAX, traceable (see the module docstring).
+
+    Args:
+        problem: The (padded) fit problem.
+        masks: Per recording, 1 for a sample and 0 for padding.
+        first: The start grid (:func:`whiskerid.fit._start.start_grid`), or ``{"flat0": …}``.
+        solver: Least-squares solver name.
+        max_steps: Solver step limit.
+
+    Returns:
+        A dict of arrays (see :class:`CoreResult`; weights per recording, padded rows).
+    """
+    if "flat0" in first:
+        flat0 = first["flat0"]
+    else:
+        flat0 = problem.flatten(start_from_grid(problem, first, masks))
+    mask = _mask_vector(problem, masks)
+    lsq = _lsq.make_solver(solver, rtol=RTOL, atol=ATOL)
+    # One block (a recording, no static test): its weight is one factor on every residual,
+    # which moves neither the optimum nor s²(JᵀJ)⁻¹, so one solve; more blocks are solved
+    # again with each weighted by its own residual scale, so that they combine fairly.
+    n_blocks = len(problem.recordings) + (problem.static_test is not None)
+
+    def one_pass(carry, _):
+        flat, weights = carry
+        res = _lsq.least_squares(
+            _masked_residuals, flat, (_weighted(problem, weights), mask), solver=lsq,
+            max_steps=max_steps,
+        )  # fmt: skip
+        new = _block_weights(problem, problem.unflatten(res.value), masks)
+        return (res.value, new), (res.ok, res.steps)
+
+    ones = jnp.ones(len(problem.recordings))
+    (flat, weights), (ok, steps) = jax.lax.scan(
+        one_pass, (flat0, ones), None, length=1 if n_blocks == 1 else 2
+    )
+    weighted = _weighted(problem, weights)
+    resid = _masked_residuals(flat, (weighted, mask))
+    jac = jax.jacfwd(_masked_residuals)(flat, (weighted, mask))
+    n_real = jnp.sum(mask)
+    out = {
+        "value": flat,
+        "ok": ok[-1],
+        "steps": steps[-1],
+        "cost": 0.5 * jnp.sum(resid**2),
+        "weights": weights,
+        "resid": resid,
+        "jac": jac,
+        "bread": _lsq.scaled_inverse_gram(jac),
+        "s2": jnp.sum(resid**2) / jnp.maximum(n_real - flat.size, 1.0),
+        "gcos": _lsq.gradient_cosine_from(jac, resid),
+    }
+    params = problem.unflatten(flat)
+    w = problem.whisker(params)
+    nm = problem.n_modes
+    for i, (r, p) in enumerate(zip(problem.recordings, params["recs"], strict=True)):
+        D, g = recording_design(r, w, p)
+        out[f"model_{i}"] = D @ p["c"] + g
+        cols = D[:, 2 : 2 + 2 * nm] * p["c"][2 : 2 + 2 * nm]
+        out[f"modal_{i}"] = cols[:, :nm] + cols[:, nm:]  # each mode's part of the signal
+
+    def reported(f):
+        return jnp.stack(list(problem.reported(problem.unflatten(f)).values()))
+
+    out["reported"], out["reported_jac"] = reported(flat), jax.jacfwd(reported)(flat)
+    return out
