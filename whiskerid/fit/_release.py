@@ -25,11 +25,18 @@ whisker and sampling rate (aliased modes included):
    forward the same way, the rates fitted again each time the stretch doubles (the next
    pluck's bending departs from the prediction). The rest of the record is searched again,
    so every pluck in a file is found.
-4. Samples clipped at the converter's rails (runs of the extreme value, or an extreme met
+4. The first samples accepted that the motion before them predicts as well (a hold, a rest
+   or a moving hand: a line through the preceding samples within the noise) are dropped: a
+   held whisker leaves with zero velocity, so the last held sample meets the decay to second
+   order and would otherwise start it (ζ many σ off on a strongly damped whisker).
+5. Samples clipped at the converter's rails (runs of the extreme value, or an extreme met
    three times by a signal spanning many converter steps) are left out: the decay starts
    after the last clipped sample.
 
-A recording that starts after the release gives a decay starting at its first sample.
+A recording that starts after the release gives a decay starting at its first sample. Every
+step costs time linear in the samples (moving filters by running sums and maxima, the walk
+forward by normal equations grown chunk by chunk, a stretch refused once is not tried again
+period by period), and a line at the Nyquist frequency is no decay.
 """
 
 from dataclasses import dataclass
