@@ -534,8 +534,8 @@ def steady_line(t: np.ndarray, y: np.ndarray) -> float | None:
     if y is None:
         return None
     f = dominant_frequency(t, y)
-    if f is None or y.size < 64:
-        return None
+    if f is None or y.size < 64 or f * float(np.median(np.diff(t))) > 0.5 - 2.0 / y.size:
+        return None  # a line at the Nyquist frequency is no drive either (samples alternate)
     amps = []
     for part in np.array_split(np.arange(y.size), 4):
         tt, yy = t[part], y[part]
