@@ -131,3 +131,83 @@ def test_an_f1_is_aliased_when_the_data_cannot_choose_it(f1, expected, rates, al
 
     got = aliased(f1, expected, rates)
     assert (got is None) if alias is None else got == pytest.approx(alias)
+
+
+# --------------------------------------------------------------------------- HAC, robustness
+def _hac_by_lags(blocks, bread):
+    """The Newey–West sum written lag by lag (the O(n L p²) form it replaced)."""
+    from whiskerid.fit._checks import hac_lag
+
+    meat = np.zeros_like(bread)
+    for jac, r, correlated in blocks:
+        s = jac * r[:, None]
+        meat += s.T @ s
+        if correlated:
+            lag = hac_lag(r)
+            for ell in range(1, lag + 1):
+                g = s[ell:].T @ s[:-ell]
+                meat += (1.0 - ell / (lag + 1.0)) * (g + g.T)
+    return bread @ meat @ bread
+
+
+@pytest.mark.parametrize("n", [17, 200, 1500])
+def test_hac_by_moving_sums_equals_the_sum_over_lags(n):
+    from whiskerid.fit._checks import bartlett_meat, hac_covariance
+
+    rng = np.random.default_rng(n)
+    jac = rng.standard_normal((n, 4)) * [1e-3, 1.0, 10.0, 1e3]
+    # residuals correlated over tens of samples (a slow misfit plus noise), and a white block
+    r = np.convolve(rng.standard_normal(n + 40), np.ones(40) / 40, "valid")[:n]
+    r += 0.05 * rng.standard_normal(n)
+    blocks = [(jac, r, True), (jac[: n // 2] * 0.5, rng.standard_normal(n // 2), False)]
+    bread = np.linalg.inv(jac.T @ jac)
+    got, lag = hac_covariance(blocks, bread)
+    assert lag > 1
+    np.testing.assert_allclose(got, _hac_by_lags(blocks, bread), rtol=1e-9, atol=0)
+    for lag in (0, 1, n - 1, 3 * n):  # any lag, up to and beyond the block
+        s = jac * r[:, None]
+        loop = s.T @ s
+        for ell in range(1, min(lag, n - 1) + 1):
+            g = s[ell:].T @ s[:-ell]
+            loop += (1.0 - ell / (lag + 1.0)) * (g + g.T)
+        np.testing.assert_allclose(bartlett_meat(s, lag), loop, rtol=1e-9, atol=1e-12)
+
+
+def test_a_clean_simulated_pluck_is_ok_within_its_sigma():
+    """The getting-started guide's pluck: the exact model, 10 s at 200 Hz, ADC codes and no
+    noise but their rounding. The decay rings down below one code in under a second, so
+    most residuals sit on one code: their median floor found a "line" of 0.002 codes at
+    0.1 Hz, and s² (averaged over them) put f1 3.7σ off. Now ok, within 3σ."""
+    from whiskerid.model import simulate
+
+    rec = paper_record()
+    r = simulate(rec, model="exact", excitation="decay", rate_hz=200.0, duration_s=10.0,
+                 observable="adc", seed=1)  # fmt: skip
+    r = Recording(t=r.t, columns=r.columns, meta={"excitation": "decay"}, source="pluck.csv")
+    cal = calibrate(rec, observations_from_recording(r, rec))
+    assert cal.status == "ok", cal.checks
+    f1 = float(rec.whisker().natural_frequencies_hz[0])
+    truth = {"f1_hz": f1, "zeta": rec.zeta if np.ndim(rec.zeta) == 0 else rec.zeta[0]}
+    for k, v in truth.items():
+        assert abs(cal.params[k]["value"] - v) <= 3 * cal.params[k]["std"], (k, cal.params[k])
+
+
+def test_absurd_inputs_are_refused_cleanly():
+    """A signal scaled by 1e300 and a start frequency of 0 are refused with a reason (they
+    raised OverflowError and ZeroDivisionError)."""
+    from whiskerid.fit import CalibrationError, find_decays
+
+    rng = np.random.default_rng(0)
+    t = np.arange(1200) / 860.0
+    tau = np.maximum(t - 0.3, 0.0)
+    y = np.where(t < 0.3, 1.0, np.exp(-8 * tau) * np.cos(2 * np.pi * 46 * tau))
+    y = 1.65 + 0.5 * y + 1e-3 * rng.standard_normal(t.size)
+    (d,) = find_decays(t, y)
+    (big,) = find_decays(t, y * 1e300)  # the detector does not depend on the units
+    assert (big.start_s, big.end_s) == (d.start_s, d.end_s)
+    rec = _fast_record()
+    obs = Observation(t, y * 1e300, observable="voltage", gain=None, name="huge")
+    with pytest.raises(CalibrationError, match="too large"):
+        calibrate(rec, obs)
+    with pytest.raises(CalibrationError, match="positive frequency"):
+        calibrate(rec, Observation(t, y, observable="voltage", gain=None), f1_start_hz=0.0)

@@ -225,6 +225,6 @@ def _recording_diagnostics(problem: FitProblem, obs: Observation, b: dict, c) ->
         "excitation": obs.excitation,
         "snr_db": float(20 * np.log10(y_std / max(rms, 1e-300))),
         "lag1_autocorr": lag1(r),
-        "residual_peak": residual_peak(obs.t, r),
+        "residual_peak": residual_peak(obs.t, r, obs.y),
         "modal_rms": [float(v) for v in np.sqrt(np.mean(modal**2, axis=0)) * y_std],
     }

@@ -51,9 +51,8 @@ from ._checks import (
     LAG1_MAX,
     check_fit,
     decay_rates,
-    hac_covariance,
-    no_smaller_than,
     residual_peak,
+    robust_covariance,
 )
 from ._checks import lag1 as lag1_autocorr
 from ._core import fit_problem
@@ -64,6 +63,8 @@ from ._problem import FitProblem, reported_names
 #: A fit is converged when the solver says so, or when no parameter direction has a cosine
 #: with the residuals above this (MINPACK's ``gtol``).
 GTOL = 1e-6
+#: Samples larger than this (in any units) are refused: their squares and sums overflow.
+MAX_SAMPLE = 1e100
 
 
 # --------------------------------------------------------------------------- results
@@ -204,6 +205,18 @@ def calibrate(
         raise CalibrationError(f"pin must be one of {PINS}, not {pin!r}")
     if not 1 <= n_modes <= 10:
         raise CalibrationError(f"n_modes = {n_modes} must be between 1 and 10")
+    for o in obs:  # sums of squares of such samples overflow: no fit can be computed
+        if float(np.max(np.abs(o.y))) > MAX_SAMPLE:
+            raise CalibrationError(
+                f"{o.name}: the samples reach {float(np.max(np.abs(o.y))):.3g}, too large to "
+                "fit in any units (their squares overflow): scale the signal to the "
+                "observable's units (--scale)"
+            )
+    if f1_start_hz is not None and not (np.isfinite(f1_start_hz) and f1_start_hz > 0):
+        raise CalibrationError(
+            f"the f1 to start from ({f1_start_hz!r} Hz, --f1-start) must be a positive "
+            "frequency: give the frequency in Hz that the whisker rings at, or leave it out"
+        )
     pin = "geometry" if pin == "auto" else pin
     nominal = record.whisker().with_modes(n_modes)
     problem = FitProblem.from_observations(
@@ -231,13 +244,9 @@ def calibrate(
     per_rec, curves, resid = _per_recording(problem, optimum, obs, res.models, resid_w)
     uncertainty = "white noise: s^2 (J^T J)^-1"
     cov_white = cov
-    if ok and max(r["lag1_autocorr"] for r in per_rec) > LAG1_MAX:
-        cov, lag = hac_covariance(_blocks(jac, resid_w, obs), bread)
-        cov = no_smaller_than(cov, cov_white)
-        uncertainty = (
-            f"HAC (Newey-West, Bartlett weights to lag {lag}; never below the white-noise "
-            "1-sigma): the residuals are correlated"
-        )
+    if ok:  # a sandwich where the residuals are correlated or their spread changes
+        correlated = max(r["lag1_autocorr"] for r in per_rec) > LAG1_MAX
+        cov, uncertainty = robust_covariance(_blocks(jac, resid_w, obs, correlated), bread, cov)
     tol = modulus_tolerance
     params, corr, fixed, note = _report(record, problem, res.reported, cov, static, nominal, tol)
     if cov is not cov_white:
@@ -287,13 +296,13 @@ def calibrate(
     return out
 
 
-def _blocks(jac, resid, obs):
+def _blocks(jac, resid, obs, correlated=True):
     """``(J, r, correlated)`` rows of each recording, then the static test's rows (if any),
     which are independent points."""
     out, start = [], 0
     for o in obs:
         stop = start + o.t.size
-        out.append((jac[start:stop], resid[start:stop], True))
+        out.append((jac[start:stop], resid[start:stop], correlated))
         start = stop
     if start < resid.size:
         out.append((jac[start:], resid[start:], False))
@@ -415,7 +424,7 @@ def _per_recording(problem: FitProblem, optimum, obs, models, resid):
             "rms_signal": y_std,
             "snr_db": float(20 * np.log10(y_std / max(np.sqrt(np.mean(r**2)), 1e-300))),
             "lag1_autocorr": lag1,
-            "residual_peak": residual_peak(o.t, r),
+            "residual_peak": residual_peak(o.t, r, o.y),
             "selection": o.selection,
             "offset": float(c[0] * y_std + y_mean),
             "drift_per_s": float(c[1] * y_std / max(o.t[-1] - o.t[0], 1e-12)),

@@ -35,6 +35,7 @@ import numpy as np
 
 from ..io import timestamp_rate
 from ._problem import ZETA_MAX
+from ._release import quantum
 
 #: Lag-1 autocorrelation of the residuals above which they are not treated as white noise.
 LAG1_MAX = 0.5
@@ -54,21 +55,33 @@ def lag1(r: np.ndarray) -> float:
     return float(np.sum(rc[1:] * rc[:-1]) / max(np.sum(rc**2), 1e-300))
 
 
-def residual_peak(t: np.ndarray, r: np.ndarray) -> tuple[float, float] | None:
+def residual_peak(
+    t: np.ndarray, r: np.ndarray, y: np.ndarray | None = None
+) -> tuple[float, float] | None:
     """The strongest line left in the residuals as ``(frequency Hz, power / noise floor)``,
     or None when no bin stands out of white noise.
 
     For white noise the periodogram's bins are exponentially distributed; the largest of
-    ``N`` exceeds ``median · (ln N + 8)/ln 2`` with probability about ``e⁻⁸``.
+    ``N`` exceeds ``median · (ln N + 8)/ln 2`` with probability about ``e⁻⁸``. The noise
+    floor is never taken below the rounding of the converter that produced ``y`` (its step
+    ``q``: white noise of variance ``q²/12``): a decay that has rung down below one step
+    sits on one code, its residuals are nearly constant and the median would put the floor
+    far under the rounding that the data cannot resolve (a clean simulated pluck then showed
+    a "line" of a five-hundredth of a code at the record's lowest frequency).
     """
     n = r.size
     if n < 64:
         return None
     dt = float(np.median(np.diff(t)))
     ru = np.interp(t[0] + dt * np.arange(n), t, r)
-    p = np.abs(np.fft.rfft((ru - ru.mean()) * np.hanning(n))) ** 2
+    window = np.hanning(n)
+    p = np.abs(np.fft.rfft((ru - ru.mean()) * window)) ** 2
     p = p[1:]  # DC and drift are the offset's business
     floor = float(np.median(p))
+    if y is not None:
+        step = 2.0 * quantum(np.asarray(y, dtype=float))
+        # the median of an exponential bin of mean q²/12 Σw² is ln 2 times that
+        floor = max(floor, np.log(2.0) * step**2 / 12.0 * float(np.sum(window**2)))
     if floor <= 0:
         return None
     i = int(np.argmax(p))
@@ -99,6 +112,10 @@ def hac_covariance(
     Rows of different blocks are independent; within a block marked ``correlated`` the
     scores are summed with Bartlett weights up to :func:`hac_lag` of its residuals.
 
+    Cost linear in the rows: the Bartlett-weighted sum of lagged products is a sum of outer
+    products of moving sums (:func:`bartlett_meat`), ``O(n p²)`` for ``n`` rows and ``p``
+    parameters whatever the lag, where summing the lags one by one costs ``O(n L p²)``.
+
     Returns:
         The covariance and the largest lag used.
     """
@@ -107,15 +124,75 @@ def hac_covariance(
     max_lag = 0
     for jac, r, correlated in blocks:
         scores = jac * r[:, None]
-        meat += scores.T @ scores
         if not correlated:
+            meat += scores.T @ scores
             continue
         lag = hac_lag(r)
         max_lag = max(max_lag, lag)
-        for ell in range(1, lag + 1):
-            g = scores[ell:].T @ scores[:-ell]
-            meat += (1.0 - ell / (lag + 1.0)) * (g + g.T)
+        meat += bartlett_meat(scores, lag)
     return bread @ meat @ bread, max_lag
+
+
+def bartlett_meat(scores: np.ndarray, lag: int) -> np.ndarray:
+    """``Γ_0 + Σ_{l=1}^{L} (1 − l/(L+1)) (Γ_l + Γ_lᵀ)`` of the rows ``s_t`` of ``scores``,
+    ``Γ_l = Σ_t s_{t+l} s_tᵀ``, in ``O(n p²)``.
+
+    Derivation: the Bartlett weight is the overlap of two boxes of ``L + 1`` samples,
+    ``(L + 1 − |t − u|)₊ = #{k : t, u ∈ [k, k + L]}`` over every window start ``k`` from
+    ``−L`` to ``n − 1`` (windows hanging over either end included). So
+    ``Σ_{t,u} (1 − |t−u|/(L+1))₊ s_t s_uᵀ = Σ_k B_k B_kᵀ / (L + 1)`` with ``B_k`` the sum of
+    the scores in window ``k``: one moving sum (from a cumulative sum) and one Gram matrix.
+    The cumulative sum is taken of the scores less their mean (added back exactly through
+    the windows' sample counts), so that its rounding does not grow with ``n``.
+    """
+    n, p = scores.shape
+    width = int(lag) + 1
+    mean = scores.mean(axis=0)
+    c = np.zeros((n + 1, p))
+    np.cumsum(scores - mean, axis=0, out=c[1:])
+    # window k covers rows max(k, 0) .. min(k + width, n) - 1, for k = -(width-1) .. n-1
+    k = np.arange(-(width - 1), n)
+    lo = np.maximum(k, 0)
+    hi = np.minimum(k + width, n)
+    boxes = c[hi] - c[lo] + (hi - lo)[:, None] * mean
+    return boxes.T @ boxes / width
+
+
+#: A sandwich 1σ this much above the white-noise one is reported instead of it.
+SANDWICH_MARGIN = 1.1
+
+
+def robust_covariance(
+    blocks: list[tuple[np.ndarray, np.ndarray, bool]], bread: np.ndarray, cov_white: np.ndarray
+) -> tuple[np.ndarray, str]:
+    """The covariance to report and a sentence saying which it is.
+
+    ``s²(JᵀJ)⁻¹`` assumes every residual has the same variance. A recording whose noise is
+    the converter's rounding breaks that: once a decay has rung down to less than a step,
+    the samples sit on one code and their residuals are nearly constant, so ``s²``
+    averages the rounding variance of the ringing samples (which carry the information)
+    with the near-zero residuals of the rest, and the 1σ comes out several times too small.
+    The sandwich ``(JᵀJ)⁻¹ (Σ s_t s_tᵀ) (JᵀJ)⁻¹`` of the scores ``s_t = J_t r_t`` (White's
+    heteroskedasticity-consistent estimate, with Newey–West lags in the blocks marked
+    correlated, :func:`hac_covariance`; scaled by ``n/(n − p)``) weighs each residual where
+    it falls. It replaces the white-noise covariance when it has lags or raises a 1σ by more
+    than ``SANDWICH_MARGIN`` (each σ never below its white-noise value); otherwise the
+    white-noise covariance stands (the two agree within their own scatter).
+    """
+    cov, lag = hac_covariance(blocks, bread)
+    n = sum(r.size for _, r, _ in blocks)
+    cov = no_smaller_than(cov * n / max(n - bread.shape[0], 1), cov_white)
+    if lag > 0:
+        return cov, (
+            f"HAC (Newey-West, Bartlett weights to lag {lag}; never below the white-noise "
+            "1-sigma): the residuals are correlated"
+        )
+    if np.any(np.diag(cov) > SANDWICH_MARGIN**2 * np.diag(cov_white)):
+        return cov, (
+            "sandwich (heteroskedasticity-consistent, White; never below the white-noise "
+            "1-sigma): the residuals' spread changes along the recording"
+        )
+    return cov_white, "white noise: s^2 (J^T J)^-1"
 
 
 def no_smaller_than(cov: np.ndarray, floor: np.ndarray) -> np.ndarray:

@@ -25,11 +25,18 @@ whisker and sampling rate (aliased modes included):
    forward the same way, the rates fitted again each time the stretch doubles (the next
    pluck's bending departs from the prediction). The rest of the record is searched again,
    so every pluck in a file is found.
-4. Samples clipped at the converter's rails (runs of the extreme value, or an extreme met
+4. The first samples accepted that the motion before them predicts as well (a hold, a rest
+   or a moving hand: a line through the preceding samples within the noise) are dropped: a
+   held whisker leaves with zero velocity, so the last held sample meets the decay to second
+   order and would otherwise start it (ζ many σ off on a strongly damped whisker).
+5. Samples clipped at the converter's rails (runs of the extreme value, or an extreme met
    three times by a signal spanning many converter steps) are left out: the decay starts
    after the last clipped sample.
 
-A recording that starts after the release gives a decay starting at its first sample.
+A recording that starts after the release gives a decay starting at its first sample. Every
+step costs time linear in the samples (moving filters by running sums and maxima, the walk
+forward by normal equations grown chunk by chunk, a stretch refused once is not tried again
+period by period), and a line at the Nyquist frequency is no decay.
 """
 
 from dataclasses import dataclass
@@ -84,10 +91,14 @@ def find_decays(t: np.ndarray, y: np.ndarray) -> list[Decay]:
         The decays found; empty when the record holds no ringing above its noise.
     """
     t = np.asarray(t, dtype=float)
-    y = np.asarray(y, dtype=float)
+    y = _normalised(y)
+    if y is None:
+        return []
     dt = float(np.median(np.diff(t)))
     f = dominant_frequency(t, y)
-    if f is None:
+    if f is None or f * dt > 0.5 - 2.0 / y.size:
+        # nothing rings, or a line at the Nyquist frequency: its samples alternate in sign
+        # whatever its phase, so neither a decay rate nor a release can be measured on it
         return []
     period = max(2, round(1.0 / (f * dt)))
     clipped = clipped_mask(y)
@@ -100,15 +111,34 @@ def find_decays(t: np.ndarray, y: np.ndarray) -> list[Decay]:
         if hi - lo < 6 * period or not np.any(active[lo:hi]):
             continue
         anchor = lo + int(np.argmax(np.where(active[lo:hi], env[lo:hi], -np.inf)))
-        d = _decay_in(t, y, clipped, active, f, anchor, lo, hi)
-        if d is None:  # not a decay here: look on either side of this stretch
-            todo += [(lo, max(lo, anchor - period)), (anchor + period, hi)]
+        d, tested_until = _decay_in(t, y, clipped, active, f, anchor, lo, hi)
+        if d is None:
+            # not a decay here: look on either side of the stretch that was tried (the
+            # search resumes after it, so a record that rings without decaying, e.g. a
+            # signal toggling at the Nyquist frequency, costs one attempt per stretch
+            # tried, not one per period)
+            todo += [(lo, max(lo, anchor - period)), (max(tested_until, anchor + period), hi)]
             continue
         decays.append(d)
         i0 = int(np.searchsorted(t, d.start_s))
         i1 = int(np.searchsorted(t, d.end_s, side="right"))
         todo += [(lo, i0), (i1, hi)]
     return sorted(decays, key=lambda d: d.start_s)
+
+
+def _normalised(y) -> np.ndarray | None:
+    """``y`` scaled by a power of two (exactly, so equal samples stay equal and a
+    converter's steps stay uniform) to at most 1 in magnitude; None if it is not finite.
+    Every threshold of the detector is relative, so its answer does not depend on the
+    units; the scaling keeps squares and variances of a huge signal (volts × 1e300) finite.
+    """
+    y = np.asarray(y, dtype=float)
+    if y.size == 0 or not np.all(np.isfinite(y)):
+        return None
+    peak = float(np.max(np.abs(y)))
+    if peak == 0.0:
+        return y.copy()
+    return np.ldexp(y, -int(np.frexp(peak)[1]))
 
 
 def dominant_frequency(t: np.ndarray, y: np.ndarray) -> float | None:
@@ -197,14 +227,11 @@ def clipped_mask(y: np.ndarray, *, min_run: int = 2) -> np.ndarray:
         if np.count_nonzero(at) >= 3 and abs(extreme - median) > 100 * q:
             mask |= at
             continue
-        run_start = None
-        for i in range(y.size + 1):
-            if i < y.size and at[i]:
-                run_start = i if run_start is None else run_start
-            elif run_start is not None:
-                if i - run_start >= min_run:
-                    mask[run_start:i] = True
-                run_start = None
+        # runs of the extreme: where ``at`` switches on and off
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], at.astype(np.int8), [0]])))
+        for start, stop in zip(edges[::2], edges[1::2], strict=True):
+            if stop - start >= min_run:
+                mask[start:stop] = True
     return mask
 
 
@@ -216,11 +243,30 @@ def quantum(y: np.ndarray) -> float:
 
 
 def _moving(fn, x, width):
-    """``fn`` (np.max or np.mean) over a centred window of ``width`` samples."""
+    """``fn`` (np.max or np.mean) over a centred window of ``width`` samples (edges held),
+    in ``O(n)`` whatever the width."""
     pad = width // 2
     xp = np.pad(x, (pad, width - 1 - pad), mode="edge")
-    windows = np.lib.stride_tricks.sliding_window_view(xp, width)
-    return fn(windows, axis=1)
+    if fn is np.mean:
+        c = np.concatenate([[0.0], np.cumsum(xp - xp[0])])
+        return (c[width:] - c[:-width]) / width + xp[0]
+    return _moving_max(xp, width)
+
+
+def _moving_max(x, width):
+    """The maxima of the ``len(x) − width + 1`` windows of ``width`` samples (van Herk /
+    Gil–Werman): within blocks of ``width``, running maxima from the left ``g`` and from the
+    right ``h``; a window starting at ``i`` spans at most two blocks, so its maximum is
+    ``max(h[i], g[i + width − 1])``."""
+    n = x.size
+    blocks = -(-n // width)
+    xb = np.full(blocks * width, -np.inf)
+    xb[:n] = x
+    xb = xb.reshape(blocks, width)
+    g = np.maximum.accumulate(xb, axis=1).ravel()
+    h = np.maximum.accumulate(xb[:, ::-1], axis=1)[:, ::-1].ravel()
+    m = n - width + 1
+    return np.maximum(h[:m], g[width - 1 : width - 1 + m])
 
 
 def _envelope(y, period):
@@ -313,11 +359,12 @@ def _robust_rms(r):
 
 def _decay_in(t, y, clipped, active, f, anchor, lo, hi):
     """The decay that rings at ``anchor`` at the record's dominant frequency ``f``, searched
-    within ``[lo, hi)``; None if none does."""
+    within ``[lo, hi)``, and the index up to which the record was tried: ``(None, index)``
+    if no decay rings there."""
     period = max(2, round(1.0 / (f * float(np.median(np.diff(t))))))
     ta = min(anchor + period, hi - 4 * period)
     if ta < lo:
-        return None
+        return None, anchor + period
     clipped_after = np.flatnonzero(clipped[ta:hi])
     if clipped_after.size:  # ringing at the rails: the decay starts after the last clip
         ta = ta + int(clipped_after[-1]) + 1
@@ -327,7 +374,7 @@ def _decay_in(t, y, clipped, active, f, anchor, lo, hi):
     ring_end = ta + int(quiet[0]) if quiet.size else hi
     tb = min(hi, ta + 20 * period, max(ring_end + period, ta + 4 * period, ta + 40))
     if tb - ta < max(4 * period, 40):  # too few samples to tell a ringing from noise
-        return None
+        return None, anchor + period
     seg = slice(ta, tb)
     # seeded with the record's frequency: a stretch's own spectrum can favour a higher mode
     freqs, rates = _fit_tail(t[seg], y[seg], f)
@@ -337,20 +384,21 @@ def _decay_in(t, y, clipped, active, f, anchor, lo, hi):
     sigma = max(_robust_rms(resid), quantum(y))
     model = y[seg] - resid
     if np.max(np.abs(model - np.median(model))) < 5 * sigma or np.var(model) < 3 * sigma**2:
-        return None  # nothing rings above the noise
+        return None, tb  # nothing rings above the noise
     if not abs(np.log(freqs[0] / f + 1e-300)) < np.log(1.25):
-        return None  # a bend or a knock, not the whisker ringing at its frequency
+        return None, tb  # a bend or a knock, not the whisker ringing at its frequency
     start = _walk_back(t, y, clipped, period, ta, lo, freqs, rates, sigma)
     end = _walk_forward(t, y, period, start, ta, tb, hi, freqs, rates, sigma)
     before = np.flatnonzero(clipped[lo:start])
     clipped_until = float(t[lo + before[-1]]) if before.size else None
-    return Decay(
+    decay = Decay(
         start_s=float(t[start]),
         end_s=float(t[end - 1]),
         frequency_hz=float(freqs[0]),
         clipped_until_s=clipped_until,
         from_start=start == 0,
     )
+    return decay, end
 
 
 def _explains(misfit, oscillation, sigma):
@@ -362,7 +410,8 @@ def _explains(misfit, oscillation, sigma):
 
 def _walk_back(t, y, clipped, period, ta, lo, freqs, rates, sigma):
     """Earliest index from which the decay model, fitted on what is already accepted, keeps
-    predicting the data going back from ``ta`` (half a period at a time, then by samples)."""
+    predicting the data going back from ``ta`` (half a period at a time, then by samples),
+    less the first samples that what came before predicts as well (:func:`_past_the_hold`)."""
     width = 8 * period
     half = max(1, period // 2)
     s = ta
@@ -382,6 +431,44 @@ def _walk_back(t, y, clipped, period, ta, lo, freqs, rates, sigma):
             if misses == 2:
                 break
         i -= 1
+    if i < lo or clipped[i]:  # the record (or the clipping) ends the walk, not a hold
+        return s
+    return _past_the_hold(y, s, lo, period, sigma)
+
+
+#: Noise scales within which a sample continues what came before it.
+HOLD_TOLERANCE = 3.0
+
+
+def _past_the_hold(y, s, lo, period, sigma):
+    """The first index from ``s`` on that the record before it does not predict.
+
+    Near a release the decay and the hold (or a rest before a tap) meet smoothly: a held
+    whisker leaves with zero velocity, so the decay extrapolated back departs from the hold
+    only as ``½ω²x₀δ²``, and the last held sample (up to a sample period before the
+    release) passes the walk back's test. A held sample in the fit pulls the decay towards
+    the hold (ζ several σ off for a strongly damped or a fast whisker), and a sample that
+    the hold explains carries no information the decay needs: so samples are dropped from
+    the start while the samples before it lie on a straight line to within the noise (a
+    hold with its drift, a rest, a moving hand: not the decay itself, where the walk back
+    can stop early) and that line predicts it within a few noise scales. A quarter period
+    after a release the whisker has moved by its whole deflection, so at most that many
+    samples are dropped.
+    """
+    for _ in range(period // 4 + 1):
+        before = y[max(lo, s - max(8, period // 2)) : s]
+        if before.size < 3:
+            break
+        x = np.arange(-before.size, 0, dtype=float)
+        coef = np.polyfit(x, before, 1)
+        spread = np.sqrt(np.sum((before - np.polyval(coef, x)) ** 2) / (before.size - 2))
+        if spread > 2.0 * sigma:  # not a hold or a rest: the walk back stopped in the decay
+            break
+        # the line's own uncertainty at the next sample (its leverage) widens the test
+        leverage = 1.0 / x.size + x.mean() ** 2 / np.sum((x - x.mean()) ** 2)
+        if abs(y[s] - coef[1]) > HOLD_TOLERANCE * sigma * np.sqrt(1.0 + leverage):
+            break
+        s += 1
     return s
 
 
@@ -389,21 +476,50 @@ def _walk_forward(t, y, period, start, ta, tb, hi, freqs, rates, sigma):
     """One past the last index that the decay model, fitted on what is already accepted,
     keeps predicting (half a period at a time). Its frequencies and decay rates are fitted
     again each time the accepted stretch doubles: a long, lightly damped ringing drifts in
-    phase away from rates estimated on its first periods."""
+    phase away from rates estimated on its first periods.
+
+    The linear part is fitted from normal equations accumulated chunk by chunk (the columns
+    do not change between refits), so the walk costs ``O(n)``, not one fit of the whole
+    accepted stretch per chunk."""
     chunk = max(2, period // 2)
     e = tb
     refit_at = 2 * (e - start)
+    gram = _Gram(t, y, t[ta], freqs, rates, start, e)
     while e < hi:
         if e - start >= refit_at:
             freqs, rates = _fit_tail(t[start:e], y[start:e], float(freqs[0]), t0=t[ta],
                                      start=(freqs, rates))  # fmt: skip
             refit_at = 2 * (e - start)
+            gram = _Gram(t, y, t[ta], freqs, rates, start, e)
         c = min(chunk, hi - e)
-        misfit, osc = _predict(t, y, slice(start, e), slice(e, e + c), t[ta], freqs, rates)
+        b = _columns(t[e : e + c], t[ta], freqs, rates)
+        coef = gram.solve()
+        misfit = y[e : e + c] - b @ coef
+        osc = float(np.sqrt(np.mean((b[:, 2:] @ coef[2:]) ** 2)))
         if not _explains(misfit, osc, sigma):
             break
+        gram.add(b, y[e : e + c])
         e += c
     return e
+
+
+class _Gram:
+    """``AᵀA`` and ``Aᵀy`` of the decay model's columns over a growing stretch."""
+
+    def __init__(self, t, y, t0, freqs, rates, i0, i1):
+        a = _columns(t[i0:i1], t0, freqs, rates)
+        self.ata = a.T @ a
+        self.aty = a.T @ y[i0:i1]
+
+    def add(self, a, y):
+        self.ata += a.T @ a
+        self.aty += a.T @ y
+
+    def solve(self):
+        """The least-squares coefficients (columns scaled to unit norm first)."""
+        d = np.sqrt(np.maximum(np.diag(self.ata), 1e-300))
+        coef, *_ = np.linalg.lstsq(self.ata / np.outer(d, d), self.aty / d, rcond=None)
+        return coef / d
 
 
 def steady_line(t: np.ndarray, y: np.ndarray) -> float | None:
@@ -414,10 +530,12 @@ def steady_line(t: np.ndarray, y: np.ndarray) -> float | None:
     most of each quarter's variance and keep its amplitude within 10 %.
     """
     t = np.asarray(t, dtype=float)
-    y = np.asarray(y, dtype=float)
-    f = dominant_frequency(t, y)
-    if f is None or y.size < 64:
+    y = _normalised(y)
+    if y is None:
         return None
+    f = dominant_frequency(t, y)
+    if f is None or y.size < 64 or f * float(np.median(np.diff(t))) > 0.5 - 2.0 / y.size:
+        return None  # a line at the Nyquist frequency is no drive either (samples alternate)
     amps = []
     for part in np.array_split(np.arange(y.size), 4):
         tt, yy = t[part], y[part]
