@@ -9,9 +9,6 @@ through :func:`ray_runner`) into one record per session and the table ``fleet.cs
 """
 
 from .. import _jax_setup as _jax_setup
-from ._calibrate import COLUMNS as COLUMNS
-from ._calibrate import TABLE_NAME as TABLE_NAME
-from ._calibrate import FleetError as FleetError
 from ._calibrate import FleetRun as FleetRun
 from ._calibrate import FleetSettings as FleetSettings
 from ._calibrate import bucket_length as bucket_length
@@ -20,9 +17,7 @@ from ._calibrate import fit_session as fit_session
 from ._calibrate import fit_sessions as fit_sessions
 from ._calibrate import iter_fit_sessions as iter_fit_sessions
 from ._calibrate import local_runner as local_runner
-from ._calibrate import read_table as read_table
 from ._calibrate import session_key as session_key
-from ._calibrate import write_table as write_table
 from ._check import FleetCheck as FleetCheck
 from ._check import WhiskerHistory as WhiskerHistory
 from ._check import check_fleet as check_fleet
@@ -32,3 +27,9 @@ from ._layout import discover as discover
 from ._ray import ray_runner as ray_runner
 from ._simulate import FleetTruth as FleetTruth
 from ._simulate import simulate_fleet as simulate_fleet
+from ._table import COLUMNS as COLUMNS
+from ._table import HEALTH_NAME as HEALTH_NAME
+from ._table import TABLE_NAME as TABLE_NAME
+from ._table import FleetError as FleetError
+from ._table import read_table as read_table
+from ._table import write_table as write_table
