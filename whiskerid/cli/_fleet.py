@@ -38,13 +38,16 @@ def add_parser(sub) -> None:
         help="calibrate a fleet of whiskers session after session, and flag changed whiskers",
         description=(
             "Whisker health across a fleet. 'fleet calibrate' fits every session of every "
-            "whisker (skipping what is done), 'fleet check' flags the sessions in which a "
-            f"whisker's f1 or zeta has changed. Layout: {_LAYOUT}."
+            "whisker (skipping what is done), 'fleet drive' adds a whisker's f1 and zeta "
+            "identified from driving recordings (no pluck) to a health log, 'fleet check' "
+            "flags the sessions in which a whisker's f1 or zeta has changed. "
+            f"Layout: {_LAYOUT}."
         ),
         formatter_class=HelpFormatter,
     )
     fsub = p.add_subparsers(dest="fleet_command", required=True, metavar="SUBCOMMAND")
     _add_calibrate(fsub)
+    _add_drive(fsub)
     _add_check(fsub)
 
 
@@ -139,6 +142,105 @@ def _add_check(fsub) -> None:
     p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.set_defaults(func=_cmd_check)
+
+
+def _add_drive(fsub) -> None:
+    p = fsub.add_parser(
+        "drive",
+        help="a whisker's f1 and zeta from driving recordings (no pluck), into FLEET/health.csv",
+        description=(
+            "Output-only identification of a whisker's f1 and zeta from recordings made while "
+            "driving: each recording (cut into blocks of --block seconds) gives a Welch "
+            "spectrum; narrow lines (the motor, periodic textures) are masked; each block's "
+            "log-spectrum over 0.8-1.25 f1 is fitted by the resonance of the base-motion "
+            "model times a smooth base spectrum (a quadratic in ln f), with a Cauchy loss; "
+            "the drive's values are the medians of the blocks', their 1-sigma from the "
+            "blocks' spread. The drive is written as one session of FLEET/health.csv (the "
+            "columns of fleet.csv, the blocks in the place of the plucks), which 'fleet "
+            "check' reads as a history of its own beside the pluck sessions."
+        ),
+        formatter_class=HelpFormatter,
+    )
+    p.add_argument("fleet", type=Path, metavar="FLEET", help="the fleet's output folder")
+    p.add_argument("recordings", type=Path, nargs="+", metavar="RECORDING",
+                   help="driving recordings (.csv, .npz, .npy) of one whisker")  # fmt: skip
+    p.add_argument("--whisker-id", required=True, help="the whisker's id (its folder's name)")
+    p.add_argument("--session", required=True,
+                   help="the drive's session name (sorts in time, e.g. 2026-11-25)")  # fmt: skip
+    p.add_argument("--whisker", type=Path, required=True,
+                   help="the whisker's record (TOML): f1 and zeta to start from")  # fmt: skip
+    p.add_argument("--signal-col", help="signal column (the first one by default)")
+    p.add_argument("--time-col", default="t", help="time column (s)")
+    p.add_argument("--block", type=float, default=60.0, help="longest block (s)")
+    p.add_argument("--force", action="store_true",
+                   help="replace the session's row if the health log has it")  # fmt: skip
+    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
+    p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    p.set_defaults(func=_cmd_drive)
+
+
+# --------------------------------------------------------------------------- drive
+def _cmd_drive(args) -> dict:
+    import numpy as np
+
+    from ..io import RecordingError, read_recording
+
+    if not (args.block >= 20):
+        raise CommandError(f"--block {args.block} must be at least 20 s (two 10 s windows)")
+    for name, value in (("--whisker-id", args.whisker_id), ("--session", args.session)):
+        if not value.strip() or "/" in value or value.startswith((".", "_")):
+            raise CommandError(f"{name} {value!r} must be a plain name (no '/', no leading "
+                               "'.' or '_')")  # fmt: skip
+    signals, rates = [], []
+    for path in args.recordings:
+        try:
+            rec = read_recording(path, time_col=args.time_col)
+            y = rec.signal(args.signal_col)
+        except (RecordingError, KeyError, ValueError) as err:
+            raise CommandError(" ".join(str(err).split())) from None
+        dt = np.diff(rec.t)
+        if rec.t.size < 2 or not np.all(dt > 0):
+            raise CommandError(f"{path}: its time column does not increase")
+        rates.append(1.0 / float(np.median(dt)))
+        signals.append((path.name, y))
+    rate = float(np.median(rates))
+    if max(abs(r / rate - 1) for r in rates) > 0.05:
+        raise CommandError("the recordings' sample rates differ by more than 5 % "
+                           f"({min(rates):.4g}-{max(rates):.4g} Hz); give one rate's")  # fmt: skip
+    from ..fleet import HEALTH_NAME, FleetError, health_row, identify_driving, read_table
+    from ..fleet import write_table as write_log
+    from ..model import RecordError, load_record
+
+    try:
+        record = load_record(args.whisker)
+    except (RecordError, OSError) as err:
+        raise CommandError(" ".join(str(err).split())) from None
+    log = args.fleet / HEALTH_NAME
+    try:
+        rows = read_table(log)
+    except FleetError as err:
+        raise CommandError(str(err)) from None
+    key = (args.whisker_id, args.session)
+    if any((r["whisker"], r["session"]) == key for r in rows) and not args.force:
+        raise CommandError(f"{log} already holds {args.whisker_id}/{args.session}; pass "
+                           "--force to replace it, or give another --session")  # fmt: skip
+    f1 = float(record.whisker().natural_frequencies_hz[0])
+    zeta = float(np.atleast_1d(record.zeta)[0])
+    try:
+        fit = identify_driving(signals, rate, f1, zeta, block_s=args.block)
+    except ValueError as err:
+        raise CommandError(str(err)) from None
+    row = health_row(args.whisker_id, args.session, fit, [p.name for p in args.recordings])
+    rows = [r for r in rows if (r["whisker"], r["session"]) != key] + [row]
+    write_log(log, rows)
+    if not args.quiet:
+        used = sum(b["status"] == "ok" for b in fit.blocks)
+        say(f"{args.whisker_id}/{args.session}: {fit.status}: f1 {fit.f1_hz:.4g} ± "
+            f"{fit.f1_std:.2g} Hz, zeta {fit.zeta:.3g} ± {fit.zeta_std:.2g} from {used} of "
+            f"{len(fit.blocks)} block(s), {fit.seconds:.0f} s of driving; wrote {log}")  # fmt: skip
+    return {"log": str(log), "status": fit.status, "f1_hz": fit.f1_hz, "f1_std": fit.f1_std,
+            "zeta": fit.zeta, "zeta_std": fit.zeta_std, "seconds": fit.seconds,
+            "blocks": fit.blocks}  # fmt: skip
 
 
 # --------------------------------------------------------------------------- calibrate

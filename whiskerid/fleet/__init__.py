@@ -4,7 +4,9 @@ sessions in which one has changed.
 :func:`discover` finds the sessions of ``ROOT/<whisker-id>/<session>/<recordings>``;
 :func:`calibrate_fleet` fits them (skipping those done, in this process or on a Ray cluster
 through :func:`ray_runner`) into one record per session and the table ``fleet.csv``;
-:func:`check_fleet` compares each whisker's later sessions with its baseline;
+:func:`identify_driving` finds a whisker's f_1 and ζ from driving data (no pluck), a
+session of the health log ``health.csv``; :func:`check_fleet` searches each whisker's
+history for a lasting change;
 :func:`simulate_fleet` writes a simulated fleet with known damage to try it on.
 """
 
@@ -21,6 +23,9 @@ from ._calibrate import session_key as session_key
 from ._check import FleetCheck as FleetCheck
 from ._check import WhiskerHistory as WhiskerHistory
 from ._check import check_fleet as check_fleet
+from ._driving import DriveFit as DriveFit
+from ._driving import health_row as health_row
+from ._driving import identify_driving as identify_driving
 from ._layout import LayoutError as LayoutError
 from ._layout import Session as Session
 from ._layout import discover as discover
