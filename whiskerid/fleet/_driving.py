@@ -74,7 +74,7 @@ class DriveFit:
 
 def _blocks(signals, rate_hz: float, block_s: float):
     """Cut each signal into blocks of at most ``block_s`` (the last at least half)."""
-    n = int(round(block_s * rate_hz))
+    n = round(block_s * rate_hz)
     for name, y in signals:
         y = np.asarray(y, dtype=float)
         starts = list(range(0, max(y.size - n // 2, 1), n))
@@ -91,7 +91,7 @@ def block_spectrum(y, rate_hz: float, *, segment_s: float = SEGMENT_S):
     """
     from scipy.signal import welch
 
-    nseg = min(int(round(segment_s * rate_hz)), y.size)
+    nseg = min(round(segment_s * rate_hz), y.size)
     return welch(y, fs=rate_hz, nperseg=nseg, noverlap=nseg // 2, window="hann",
                  detrend="linear")  # fmt: skip
 
