@@ -316,3 +316,23 @@ def test_ray_with_two_workers_gives_the_local_table(fleet, tmp_path):
     remote = read_table(out / "fleet.csv")
     same = [c for c in COLUMNS if c not in ("fitted_at", "fit_s")]
     assert [[r[c] for c in same] for r in remote] == [[r[c] for c in same] for r in local]
+
+
+def test_the_progress_line_moves_while_a_stage_lasts():
+    import time
+
+    from whiskerid.fleet._calibrate import _Ticker
+
+    class Bar:
+        shown: list[str] = []
+
+        def set_postfix_str(self, text, refresh=True):
+            self.shown.append(text)
+
+    bar = Bar()
+    ticker = _Ticker(bar)
+    ticker.stage("fitting 3 single pluck(s)")
+    time.sleep(1.3)  # a compilation, with nothing else to show
+    ticker.stop()
+    assert bar.shown[0] == "fitting 3 single pluck(s) (0 s)"
+    assert len(bar.shown) >= 2 and bar.shown[-1].endswith("(1 s)")
