@@ -324,7 +324,8 @@ def test_the_progress_line_moves_while_a_stage_lasts():
     from whiskerid.fleet._calibrate import _Ticker
 
     class Bar:
-        shown: list[str] = []
+        def __init__(self):
+            self.shown = []
 
         def set_postfix_str(self, text, refresh=True):
             self.shown.append(text)
