@@ -240,9 +240,7 @@ def _layouts(tmp_path):
 @pytest.mark.parametrize(
     ("damage", "message"),
     [
-        (lambda w: (w / "whisker.toml").unlink(), "no record"),
         (lambda w: (w / "x.csv").write_text(""), "not in a session folder"),
-        (lambda w: (w / "s2").mkdir(), "holds no recordings"),
         (lambda w: (w.parent / "y.npy").write_text(""), "directly"),
         (lambda w: shutil.rmtree(w.parent), "does not exist"),
     ],
@@ -254,6 +252,22 @@ def test_a_bad_layout_says_what_was_found_and_expected(tmp_path, damage, message
     with pytest.raises(LayoutError, match=message) as err:
         discover(w.parent)
     assert "expected" in str(err.value) or "record" in str(err.value)
+
+
+def test_an_empty_session_or_a_missing_record_is_isolated(fleet, tmp_path):
+    root, out = _copy(fleet, tmp_path)
+    (root / "whisker-000" / "session-07").mkdir()  # an empty session folder
+    (root / "whisker-001" / "whisker.toml").unlink()  # a whisker without its record
+    run = calibrate_fleet(root, out)
+    rows = {(r["whisker"], r["session"]): r for r in run.rows}
+    empty = rows[("whisker-000", "session-07")]
+    assert empty["status"] == "bad data" and "holds no recordings" in empty["checks"]
+    orphans = [r for (w, _), r in rows.items() if w == "whisker-001"]
+    assert len(orphans) == 4
+    assert all(r["status"] == "bad data" and "no record" in r["checks"] for r in orphans)
+    assert all(r["status"] in ("ok", "check") for (w, s), r in rows.items()
+               if w == "whisker-002")  # fmt: skip
+    assert (run.fitted, run.skipped) == (5, 6)  # nothing else fitted again
 
 
 def test_cli_writes_the_table_flags_and_plots(fleet, tmp_path, capsys):
@@ -274,9 +288,20 @@ def test_cli_writes_the_table_flags_and_plots(fleet, tmp_path, capsys):
     assert result["flagged_whiskers"] == 1
     assert (check / f"{whisker}.png").stat().st_size > 1000
     lines = (check / "flags.csv").read_text().splitlines()
-    assert lines[0].startswith("whisker,session,parameter") and whisker in lines[1]
+    assert lines[0].startswith("whisker,source,session,parameter") and whisker in lines[1]
+    assert result["events"][0]["whisker"] == whisker
     assert main(["fleet", "check", str(tmp_path / "nowhere")]) == 2
     assert "fleet calibrate" in capsys.readouterr().err
+
+
+def test_ray_with_no_cluster_names_our_option_and_writes_nothing(fleet, tmp_path, capsys):
+    pytest.importorskip("ray")
+    out = tmp_path / "out"
+    args = ["fleet", "calibrate", str(fleet["root"]), "--out", str(out), "--ray", "no-such:x"]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "--ray no-such:x" in err and "--address" not in err and "--ray local" in err
+    assert not out.exists()
 
 
 @pytest.mark.slow
@@ -291,3 +316,24 @@ def test_ray_with_two_workers_gives_the_local_table(fleet, tmp_path):
     remote = read_table(out / "fleet.csv")
     same = [c for c in COLUMNS if c not in ("fitted_at", "fit_s")]
     assert [[r[c] for c in same] for r in remote] == [[r[c] for c in same] for r in local]
+
+
+def test_the_progress_line_moves_while_a_stage_lasts():
+    import time
+
+    from whiskerid.fleet._calibrate import _Ticker
+
+    class Bar:
+        def __init__(self):
+            self.shown = []
+
+        def set_postfix_str(self, text, refresh=True):
+            self.shown.append(text)
+
+    bar = Bar()
+    ticker = _Ticker(bar)
+    ticker.stage("fitting 3 single pluck(s)")
+    time.sleep(1.3)  # a compilation, with nothing else to show
+    ticker.stop()
+    assert bar.shown[0] == "fitting 3 single pluck(s) (0 s)"
+    assert len(bar.shown) >= 2 and bar.shown[-1].endswith("(1 s)")

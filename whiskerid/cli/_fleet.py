@@ -14,14 +14,20 @@ _LAYOUT = (
     "shared record with --whisker)"
 )
 _RULE = (
-    "A later session is flagged for f1 or zeta when its change from the baseline (the mean of "
-    "the first --baseline K usable sessions) has |z| >= --z AND is at least --min-change-f1 / "
-    "--min-change-zeta percent. z divides the change by sqrt(sigma_day^2/K + max(sigma_day^2, "
-    "s^2/n)), s being the spread of the session's own n plucks, and sigma_day the largest of: "
-    "the scatter of the baseline sessions, the spread of repeated plucks within them (over "
-    "the square root of the plucks per session) and the median 1-sigma of the baseline fits "
-    "(HAC where the residuals are correlated). The p-value is the two-sided normal one of z. "
-    "A later session whose fit failed is flagged as 'fit'."
+    "Each whisker's history is searched for a lasting change: its sessions are read in "
+    "order, each against the reference of the usable sessions before it that were not found "
+    "changed (the first --baseline K only form it). A session's change from the reference "
+    "mean has z = change / sqrt(sigma_day^2/K_ref + max(sigma_day^2, s^2/n)), s being the "
+    "spread of its own n plucks and sigma_day the largest of: the reference sessions' "
+    "scatter, the same scatter pooled over the fleet's whiskers, the spread of repeated "
+    "plucks within them (over the square root of the plucks per session) and the median "
+    "1-sigma of the reference fits. A step is found where |z| >= --z, a drift where a "
+    "two-sided CUSUM of the z's (allowance 0.5) reaches --drift; either only when the "
+    "session's change is at least --min-change-f1 / --min-change-zeta percent. The change "
+    "is then located by a two-segment search over the whole history: the session where it "
+    "began and every later one are flagged, with its size and 1-sigma. A later session "
+    "whose fit failed (or whose row is torn or not a number) is flagged as 'fit'. Sessions "
+    "of a driving health log (FLEET/health.csv, 'fleet drive') form histories of their own."
 )
 
 
@@ -32,13 +38,16 @@ def add_parser(sub) -> None:
         help="calibrate a fleet of whiskers session after session, and flag changed whiskers",
         description=(
             "Whisker health across a fleet. 'fleet calibrate' fits every session of every "
-            "whisker (skipping what is done), 'fleet check' flags the sessions in which a "
-            f"whisker's f1 or zeta has changed. Layout: {_LAYOUT}."
+            "whisker (skipping what is done), 'fleet drive' adds a whisker's f1 and zeta "
+            "identified from driving recordings (no pluck) to a health log, 'fleet check' "
+            "flags the sessions in which a whisker's f1 or zeta has changed. "
+            f"Layout: {_LAYOUT}."
         ),
         formatter_class=HelpFormatter,
     )
     fsub = p.add_subparsers(dest="fleet_command", required=True, metavar="SUBCOMMAND")
     _add_calibrate(fsub)
+    _add_drive(fsub)
     _add_check(fsub)
 
 
@@ -109,25 +118,129 @@ def _add_check(fsub) -> None:
         "check",
         help="flag the sessions in which a whisker's f1 or zeta changed beyond its repeats",
         description=(
-            "For each whisker, compare every session after the baseline with it. " + _RULE +
-            " Writes OUT/flags.csv (the flagged whisker-sessions: parameter, value, baseline, "
-            "change in percent, z, p-value) and OUT/<whisker>.png for each flagged whisker "
-            "(f1 and zeta over sessions, the baseline and its band), and prints the flags."
+            _RULE + " Writes OUT/flags.csv (the flagged whisker-sessions: parameter, value, "
+            "reference, change in percent, z, p-value, CUSUM, the session where the change "
+            "began) and OUT/<whisker>.png for each flagged whisker (f1 and zeta over "
+            "sessions, the reference and its band, where the change began), and prints the "
+            "changes found."
         ),
         formatter_class=HelpFormatter,
     )  # fmt: skip
     p.add_argument("fleet", type=Path, metavar="FLEET", help="a 'fleet calibrate' output folder")
     p.add_argument("--out", type=Path, help="folder for flags.csv and the PNGs (FLEET/check)")
-    p.add_argument("--baseline", type=int, default=3,
-                   help="usable sessions forming each whisker's baseline (K)")  # fmt: skip
-    p.add_argument("--z", type=float, default=4.0, help="|z| at and above which a change counts")
+    p.add_argument("--baseline", type=int, default=2,
+                   help="usable sessions forming each whisker's first reference (K)")  # fmt: skip
+    p.add_argument("--z", type=float, default=4.0,
+                   help="|z| at and above which one session's change is a step")  # fmt: skip
+    p.add_argument("--drift", type=float, default=5.0,
+                   help="CUSUM of z at and above which a slow change is a drift")  # fmt: skip
     p.add_argument("--min-change-f1", type=float, default=1.0,
                    help="smallest relative change of f1 flagged (percent)")  # fmt: skip
     p.add_argument("--min-change-zeta", type=float, default=20.0,
                    help="smallest relative change of zeta flagged (percent)")  # fmt: skip
     p.add_argument("--no-plots", action="store_true", help="write no PNGs")
+    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.set_defaults(func=_cmd_check)
+
+
+def _add_drive(fsub) -> None:
+    p = fsub.add_parser(
+        "drive",
+        help="a whisker's f1 and zeta from driving recordings (no pluck), into FLEET/health.csv",
+        description=(
+            "Output-only identification of a whisker's f1 and zeta from recordings made while "
+            "driving: each recording (cut into blocks of --block seconds) gives a Welch "
+            "spectrum; narrow lines (the motor, periodic textures) are masked; each block's "
+            "log-spectrum over 0.8-1.25 f1 is fitted by the resonance of the base-motion "
+            "model times a smooth base spectrum (a quadratic in ln f), with a Cauchy loss; "
+            "the drive's values are the medians of the blocks', their 1-sigma from the "
+            "blocks' spread. The drive is written as one session of FLEET/health.csv (the "
+            "columns of fleet.csv, the blocks in the place of the plucks), which 'fleet "
+            "check' reads as a history of its own beside the pluck sessions."
+        ),
+        formatter_class=HelpFormatter,
+    )
+    p.add_argument("fleet", type=Path, metavar="FLEET", help="the fleet's output folder")
+    p.add_argument("recordings", type=Path, nargs="+", metavar="RECORDING",
+                   help="driving recordings (.csv, .npz, .npy) of one whisker")  # fmt: skip
+    p.add_argument("--whisker-id", required=True, help="the whisker's id (its folder's name)")
+    p.add_argument("--session", required=True,
+                   help="the drive's session name (sorts in time, e.g. 2026-11-25)")  # fmt: skip
+    p.add_argument("--whisker", type=Path, required=True,
+                   help="the whisker's record (TOML): f1 and zeta to start from")  # fmt: skip
+    p.add_argument("--signal-col", help="signal column (the first one by default)")
+    p.add_argument("--time-col", default="t", help="time column (s)")
+    p.add_argument("--block", type=float, default=60.0, help="longest block (s)")
+    p.add_argument("--force", action="store_true",
+                   help="replace the session's row if the health log has it")  # fmt: skip
+    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
+    p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    p.set_defaults(func=_cmd_drive)
+
+
+# --------------------------------------------------------------------------- drive
+def _cmd_drive(args) -> dict:
+    import numpy as np
+
+    from ..io import RecordingError, read_recording
+
+    if not (args.block >= 20):
+        raise CommandError(f"--block {args.block} must be at least 20 s (two 10 s windows)")
+    for name, value in (("--whisker-id", args.whisker_id), ("--session", args.session)):
+        if not value.strip() or "/" in value or value.startswith((".", "_")):
+            raise CommandError(f"{name} {value!r} must be a plain name (no '/', no leading "
+                               "'.' or '_')")  # fmt: skip
+    signals, rates = [], []
+    for path in args.recordings:
+        try:
+            rec = read_recording(path, time_col=args.time_col)
+            y = rec.signal(args.signal_col)
+        except (RecordingError, KeyError, ValueError) as err:
+            raise CommandError(" ".join(str(err).split())) from None
+        dt = np.diff(rec.t)
+        if rec.t.size < 2 or not np.all(dt > 0):
+            raise CommandError(f"{path}: its time column does not increase")
+        rates.append(1.0 / float(np.median(dt)))
+        signals.append((path.name, y))
+    rate = float(np.median(rates))
+    if max(abs(r / rate - 1) for r in rates) > 0.05:
+        raise CommandError("the recordings' sample rates differ by more than 5 % "
+                           f"({min(rates):.4g}-{max(rates):.4g} Hz); give one rate's")  # fmt: skip
+    from ..fleet import HEALTH_NAME, FleetError, health_row, identify_driving, read_table
+    from ..fleet import write_table as write_log
+    from ..model import RecordError, load_record
+
+    try:
+        record = load_record(args.whisker)
+    except (RecordError, OSError) as err:
+        raise CommandError(" ".join(str(err).split())) from None
+    log = args.fleet / HEALTH_NAME
+    try:
+        rows = read_table(log)
+    except FleetError as err:
+        raise CommandError(str(err)) from None
+    key = (args.whisker_id, args.session)
+    if any((r["whisker"], r["session"]) == key for r in rows) and not args.force:
+        raise CommandError(f"{log} already holds {args.whisker_id}/{args.session}; pass "
+                           "--force to replace it, or give another --session")  # fmt: skip
+    f1 = float(record.whisker().natural_frequencies_hz[0])
+    zeta = float(np.atleast_1d(record.zeta)[0])
+    try:
+        fit = identify_driving(signals, rate, f1, zeta, block_s=args.block)
+    except ValueError as err:
+        raise CommandError(str(err)) from None
+    row = health_row(args.whisker_id, args.session, fit, [p.name for p in args.recordings])
+    rows = [r for r in rows if (r["whisker"], r["session"]) != key] + [row]
+    write_log(log, rows)
+    if not args.quiet:
+        used = sum(b["status"] == "ok" for b in fit.blocks)
+        say(f"{args.whisker_id}/{args.session}: {fit.status}: f1 {fit.f1_hz:.4g} ± "
+            f"{fit.f1_std:.2g} Hz, zeta {fit.zeta:.3g} ± {fit.zeta_std:.2g} from {used} of "
+            f"{len(fit.blocks)} block(s), {fit.seconds:.0f} s of driving; wrote {log}")  # fmt: skip
+    return {"log": str(log), "status": fit.status, "f1_hz": fit.f1_hz, "f1_std": fit.f1_std,
+            "zeta": fit.zeta, "zeta_std": fit.zeta_std, "seconds": fit.seconds,
+            "blocks": fit.blocks}  # fmt: skip
 
 
 # --------------------------------------------------------------------------- calibrate
@@ -142,7 +255,7 @@ def _cmd_calibrate(args) -> dict:
         raise CommandError(f"ROOT {args.root} is not a folder; give the fleet's recordings")
     check_outputs({"--out": args.out}, {"ROOT": args.root, "--whisker": args.whisker},
                   force=True, folders=("--out",))  # fmt: skip
-    from ..fleet import FleetSettings, calibrate_fleet, ray_runner
+    from ..fleet import FleetError, FleetSettings, calibrate_fleet, ray_runner
 
     settings = FleetSettings(
         n_modes=args.modes, pin=args.pin, solver=args.solver, observable=args.observable,
@@ -151,7 +264,13 @@ def _cmd_calibrate(args) -> dict:
     )  # fmt: skip
     runner = None
     if args.ray:
-        runner = ray_runner(args.ray, num_cpus=args.workers)
+        if args.ray != "local" and not args.quiet:
+            where = "of this machine" if args.ray == "auto" else f"at {args.ray}"
+            say(f"joining the Ray cluster {where} (--ray {args.ray}) …")
+        try:
+            runner = ray_runner(args.ray, num_cpus=args.workers)
+        except (FleetError, RuntimeError) as err:
+            raise CommandError(str(err)) from None
     table = args.out / "fleet.csv"
     WATCH.notes.append(lambda: f"what finished is kept in {table}" if table.exists() else None)
     run = calibrate_fleet(args.root, args.out, record=args.whisker, settings=settings,
@@ -176,26 +295,35 @@ def _cmd_calibrate(args) -> dict:
 
 # --------------------------------------------------------------------------- check
 def _cmd_check(args) -> dict:
-    from ..fleet import TABLE_NAME
+    from ..fleet import HEALTH_NAME, TABLE_NAME
 
     table = args.fleet / TABLE_NAME
-    if not table.is_file():
-        raise CommandError(f"{args.fleet} holds no {TABLE_NAME}; run 'whiskerid fleet calibrate' "
-                           "first, or give its --out folder")  # fmt: skip
+    if not table.is_file() and not (args.fleet / HEALTH_NAME).is_file():
+        raise CommandError(f"{args.fleet} holds no {TABLE_NAME} (nor {HEALTH_NAME}); run "
+                           "'whiskerid fleet calibrate' (or 'fleet drive') first, or give its "
+                           "--out folder")  # fmt: skip
     if args.baseline < 1:
         raise CommandError(f"--baseline {args.baseline} must be at least 1")
-    for flag, v in (("--z", args.z), ("--min-change-f1", args.min_change_f1),
+    for flag, v in (("--z", args.z), ("--drift", args.drift),
+                    ("--min-change-f1", args.min_change_f1),
                     ("--min-change-zeta", args.min_change_zeta)):  # fmt: skip
-        if not (v >= 0 and v < float("inf")) or (flag == "--z" and v == 0):
+        if not (v >= 0 and v < float("inf")) or (flag in ("--z", "--drift") and v == 0):
             raise CommandError(f"{flag} {v!r} must be a positive number")
     out = args.out or args.fleet / "check"
-    check_outputs({"--out": out}, {"FLEET table": table}, force=True, folders=("--out",))
-    from ..fleet import check_fleet, read_table
+    check_outputs({"--out": out}, {"FLEET table": table, "FLEET health log": args.fleet /
+                  HEALTH_NAME}, force=True, folders=("--out",))  # fmt: skip
+    from ..fleet import FleetError, check_fleet, read_table
 
+    try:
+        rows = read_table(table)
+        rows += [{**r, "source": "drive"} for r in read_table(args.fleet / HEALTH_NAME)]
+    except FleetError as err:
+        raise CommandError(str(err)) from None
     result = check_fleet(
-        read_table(table),
+        rows,
         baseline=args.baseline,
         z_min=args.z,
+        drift_h=args.drift,
         min_change={"f1_hz": args.min_change_f1 / 100, "zeta": args.min_change_zeta / 100},
     )
     flags_path = _write_flags(out / "flags.csv", result.flags)
@@ -203,15 +331,18 @@ def _cmd_check(args) -> dict:
     if not args.no_plots:
         from ..plot import plot_fleet_history
 
-        for whisker in sorted({f["whisker"] for f in result.flags}):
-            h = result.histories[whisker]
+        for name, h in sorted(result.histories.items()):
+            if not h.flagged:
+                continue
             plots.append(str(plot_fleet_history(
-                out / f"{whisker}.png", whisker, h.sessions, h.values, h.errors, h.plucks,
-                baseline=h.baseline, centre=h.centre, band=h.band, flagged=h.flagged,
+                out / f"{name.replace(' (', '-').rstrip(')')}.png", name, h.sessions, h.values,
+                h.errors, h.plucks, baseline=h.baseline, centre=h.centre, band=h.band,
+                flagged=h.flagged, began=h.began,
             )))  # fmt: skip
-    _print_flags(result)
+    _print_flags(result, quiet=args.quiet)
     return {
         "flags": result.flags,
+        "events": result.events,
         "changes": result.changes,
         "notes": result.notes,
         "settings": result.settings,
@@ -222,8 +353,8 @@ def _cmd_check(args) -> dict:
     }
 
 
-_FLAG_COLUMNS = ("whisker", "session", "parameter", "value", "baseline", "change_pct",
-                 "sigma", "z", "p_value", "status")  # fmt: skip
+_FLAG_COLUMNS = ("whisker", "source", "session", "parameter", "value", "baseline",
+                 "change_pct", "sigma", "z", "p_value", "cusum", "began", "status")  # fmt: skip
 
 
 def _write_flags(path: Path, flags: list[dict]) -> Path:
@@ -240,18 +371,23 @@ def _write_flags(path: Path, flags: list[dict]) -> Path:
     return atomic_write(path, buf.getvalue())
 
 
-def _print_flags(result) -> None:
+def _print_flags(result, *, quiet: bool = False) -> None:
+    if quiet:
+        return
     for note in result.notes:
         say(f"note: {note}")
+    names = {"f1_hz": "f1", "zeta": "zeta"}
+    for e in result.events:
+        where = "" if e["source"] == "pluck" else f" ({e['source']})"
+        say(f"{e['whisker']}{where}: {names[e['parameter']]} changed {e['size_pct']:+.2f} % "
+            f"± {100 * e['size_sigma'] / abs(e['before']):.2f} % (1 sigma) from session "
+            f"{e['began']} on ({e['n_after']} session(s); a {e['rule']} found at "
+            f"{e['detected']})")  # fmt: skip
+    fits = [f for f in result.flags if f["parameter"] == "fit"]
+    for f in fits:
+        say(f"{f['whisker']}/{f['session']}: no usable fit ({f['status']})")
     if not result.flags:
-        say(f"no change flagged in {len(result.histories)} whisker(s)")
+        say(f"no change flagged in {len(result.histories)} whisker history(ies)")
         return
-    say(f"{'whisker':<16} {'session':<16} {'param':<6} {'change':>9} {'z':>8} {'p':>9}")
-    for f in result.flags:
-        if f["parameter"] == "fit":
-            say(f"{f['whisker']:<16} {f['session']:<16} {'fit':<6} status {f['status']}")
-            continue
-        name = "f1" if f["parameter"] == "f1_hz" else "zeta"
-        say(f"{f['whisker']:<16} {f['session']:<16} {name:<6} {f['change_pct']:>+8.2f}% "
-            f"{f['z']:>8.1f} {f['p_value']:>9.2g}")  # fmt: skip
-    print(f"{len(result.flags)} flag(s)", file=sys.stderr)
+    whiskers = len({f["whisker"] for f in result.flags})
+    print(f"{len(result.flags)} flag(s) on {whiskers} whisker(s)", file=sys.stderr)

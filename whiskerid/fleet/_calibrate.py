@@ -35,15 +35,13 @@ finished).
 A session whose data cannot be read or fitted gets its own status and never stops the others.
 """
 
-import csv
 import datetime
 import hashlib
-import io
 import json
 import math
 import time
 import tomllib
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
@@ -61,14 +59,8 @@ from ..fit import (
 from ..io import RecordingError, atomic_write
 from ..model import RecordError, load_record
 from ._layout import Session, discover
+from ._table import COLUMNS, TABLE_NAME, FleetError, read_table, write_table
 
-#: The table's columns, in order.
-COLUMNS = (
-    "whisker", "session", "status", "f1_hz", "f1_std", "zeta", "zeta_std", "uncertainty",
-    "checks", "n_plucks", "f1_plucks", "zeta_plucks", "f1_pluck_sd", "zeta_pluck_sd",
-    "pluck_status", "files", "sha256", "record_sha256", "key", "fitted_at", "fit_s",
-)  # fmt: skip
-TABLE_NAME = "fleet.csv"
 #: Statuses of a converged fit whose values may be used (``check``: a check failed, e.g. the
 #: correlated residuals of every real recording, with the HAC 1σ reported).
 USABLE = ("ok", "check")
@@ -83,10 +75,6 @@ MIN_SAMPLES, MIN_PERIODS = 64, 5
 OUTLIER_F1 = 0.1
 #: Statuses of a session that has no record (nothing could be fitted).
 NO_RECORD = ("bad data", "error")
-
-
-class FleetError(ValueError):
-    """A fleet run that cannot start (an output that is not ours, a table not a fleet's)."""
 
 
 @dataclass(frozen=True)
@@ -210,17 +198,39 @@ def fit_sessions(sessions: list[Session], settings: FleetSettings, keys: list[st
 SESSION_CHUNK = 16
 
 
-def iter_fit_sessions(sessions: list[Session], settings: FleetSettings, keys: list[str]):
+def iter_fit_sessions(
+    sessions: list[Session],
+    settings: FleetSettings,
+    keys: list[str],
+    *,
+    stage: Callable[[str], None] | None = None,
+):
     """Fit the sessions, yielding each result (as :func:`fit_session`) when it is done.
 
     Every session is read first; the single plucks of all of them are then calibrated
     together, fits of one shape in one batched program
     (:func:`whiskerid.fit.calibrate_each`); then each session's joint fit starts from its
     single plucks' values.
+
+    Args:
+        sessions: The sessions.
+        settings: How to read and fit.
+        keys: Their keys.
+        stage: Called with a few words saying what is being done (a progress bar's text):
+            the first batch of each pluck length and the first joint fit of each shape
+            compile their programs, which takes tens of seconds with nothing else to show.
     """
+    say = stage or (lambda text: None)
+    say(f"reading {len(sessions)} session(s)")
     prepared = [_prepare(s, settings, k) for s, k in zip(sessions, keys, strict=True)]
+    n = sum(len(p.obs) for p in prepared if p.obs is not None)
+    lengths = sorted({o.t.size for p in prepared if p.obs is not None for o in p.obs})
+    sizes = ", ".join(map(str, lengths)) or "no"
+    say(f"fitting {n} single pluck(s) of {len(sessions)} session(s) in batches of {sizes} "
+        "samples (a new length compiles first)")  # fmt: skip
     singles = _singles(prepared, settings)
     for prep, fits in zip(prepared, singles, strict=True):
+        say(f"joint fit of {prep.session.whisker}/{prep.session.session}")
         yield _finish(prep, fits, settings)
 
 
@@ -246,6 +256,9 @@ def _prepare(session: Session, settings: FleetSettings, key: str) -> _Prepared:
     except OSError:
         pass  # reported below, where the files are read
     prep = _Prepared(session, key, row)
+    if session.problem:  # an empty session, a whisker without its record
+        row.update(status="bad data", checks=session.problem, n_plucks=0)
+        return prep
     try:
         prep.record = load_record(session.record)
         prep.obs = _observations(session.files, prep.record, settings)
@@ -376,40 +389,11 @@ def _fit_plucks(prep: _Prepared, singles, settings):
     return row, out.to_toml()
 
 
-# --------------------------------------------------------------------------- the table
-def read_table(path: str | Path) -> list[dict]:
-    """The rows of a fleet table (``fleet.csv``), as strings; [] if there is none.
-
-    Raises:
-        FleetError: The file is not a fleet table.
-    """
-    path = Path(path)
-    if not path.exists():
-        return []
-    with open(path, newline="", encoding="utf-8") as fh:
-        reader = csv.DictReader(fh)
-        if tuple(reader.fieldnames or ()) != COLUMNS:
-            raise FleetError(
-                f"{path} is not a fleet table (its header is not whiskerid's); "
-                "give another --out folder"
-            )
-        return list(reader)
-
-
-def write_table(path: str | Path, rows: Iterable[dict]) -> Path:
-    """Write the rows (sorted by whisker and session) atomically."""
-    buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=COLUMNS, lineterminator="\n")
-    writer.writeheader()
-    for row in sorted(rows, key=lambda r: (r["whisker"], r["session"])):
-        writer.writerow({c: row.get(c, "") for c in COLUMNS})
-    return atomic_write(path, buf.getvalue())
-
-
 def session_key(session: Session, settings_digest: str) -> str:
     """SHA-256 of the session's files (names and SHA-256), its record's and the settings'."""
     parts = [f"{p.name}:{sha256_of(p)}" for p in session.files]
-    parts += [f"record:{sha256_of(session.record)}", f"settings:{settings_digest}"]
+    record = sha256_of(session.record) if session.record.is_file() else "missing"
+    parts += [f"record:{record}", f"settings:{settings_digest}"]
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()
 
 
@@ -509,13 +493,17 @@ def calibrate_fleet(
     runner = runner or local_runner
     t0 = time.perf_counter()
     last_write = 0.0
-    bar = None
+    bar = ticker = None
     if progress and todo:
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(todo), unit="session", desc="fleet calibrate", leave=False)
+        bar, ticker = _progress(len(todo))
+    if runner is local_runner and bar is not None:
+        results = runner(todo, settings, keys, stage=ticker.stage)
+    else:
+        if bar is not None and runner is not local_runner:
+            ticker.stage("waiting for the first sessions from the workers")
+        results = runner(todo, settings, keys)
     try:
-        for result in runner(todo, settings, keys):
+        for result in results:
             row = result["row"]
             if result["record_toml"] is not None:
                 atomic_write(out / row["whisker"] / f"{row['session']}.toml", result["record_toml"])
@@ -529,6 +517,7 @@ def calibrate_fleet(
                 bar.update(1)
     finally:
         if bar is not None:
+            ticker.stop()
             bar.close()
         if run.fitted or not run.table.exists():
             write_table(run.table, rows.values())
@@ -537,9 +526,51 @@ def calibrate_fleet(
     return run
 
 
-def local_runner(sessions: list[Session], settings: FleetSettings, keys: list[str]):
+class _Ticker:
+    """Refreshes a progress bar once a second with what is being done and for how long, so
+    that a compilation of tens of seconds shows a line that moves."""
+
+    def __init__(self, bar):
+        import threading
+
+        self.bar, self.text, self.since = bar, "", time.perf_counter()
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def stage(self, text: str) -> None:
+        self.text, self.since = text, time.perf_counter()
+        self._show()
+
+    def _show(self) -> None:
+        self.bar.set_postfix_str(f"{self.text} ({time.perf_counter() - self.since:.0f} s)",
+                                 refresh=True)  # fmt: skip
+
+    def _run(self) -> None:
+        while not self._done.wait(1.0):
+            self._show()
+
+    def stop(self) -> None:
+        self._done.set()
+        self._thread.join()
+
+
+def _progress(total: int):
+    from tqdm import tqdm
+
+    bar = tqdm(total=total, unit="session", desc="fleet calibrate", leave=False)
+    return bar, _Ticker(bar)
+
+
+def local_runner(
+    sessions: list[Session],
+    settings: FleetSettings,
+    keys: list[str],
+    *,
+    stage: Callable[[str], None] | None = None,
+):
     """Fit the sessions in this process, :data:`SESSION_CHUNK` at a time (yields each
-    result)."""
+    result; ``stage`` as :func:`iter_fit_sessions`)."""
     for i in range(0, len(sessions), SESSION_CHUNK):
         chunk = slice(i, i + SESSION_CHUNK)
-        yield from iter_fit_sessions(sessions[chunk], settings, keys[chunk])
+        yield from iter_fit_sessions(sessions[chunk], settings, keys[chunk], stage=stage)

@@ -34,12 +34,16 @@ class Session:
         session: The session's name (its folder's name).
         files: Its recordings, sorted by name.
         record: The whisker record (TOML) the session is fitted with.
+        problem: Why the session cannot be fitted (no recordings in it, no record for its
+            whisker), or ``""``: such a session gets the status ``bad data`` with this
+            reason, and the others go on.
     """
 
     whisker: str
     session: str
     files: tuple[Path, ...]
     record: Path
+    problem: str = ""
 
 
 def _visible(path: Path) -> bool:
@@ -62,8 +66,10 @@ def discover(root: str | Path, record: str | Path | None = None) -> list[Session
 
     Raises:
         LayoutError: ``root`` is not a folder, holds no whisker folders, a whisker has no
-            record or no sessions, recordings lie outside session folders, or a session
-            holds no recordings. The message says what was found and what is expected.
+            sessions, or recordings lie outside session folders. The message says what was
+            found and what is expected. A whisker without its record, or a session without
+            recordings, is not an error of the whole fleet: its sessions carry the
+            :attr:`Session.problem`.
     """
     root = Path(root)
     if not root.is_dir():
@@ -83,10 +89,11 @@ def discover(root: str | Path, record: str | Path | None = None) -> list[Session
     for w in whiskers:
         own = w / RECORD_NAME
         rec = shared if shared is not None else own
+        no_record = ""
         if not rec.is_file():
-            raise LayoutError(
-                f"whisker {w.name}: no record {own} (found {_listing(w)}); put the whisker's "
-                "record there or give one shared record with --whisker"
+            no_record = (
+                f"whisker {w.name}: no record {own} (found {_listing(w)}); put the "
+                "whisker's record there or give one shared record with --whisker"
             )
         stray = sorted(p.name for p in w.iterdir() if p.is_file() and _visible(p)
                        and p.suffix.lower() in RECORDING_SUFFIXES)  # fmt: skip
@@ -101,10 +108,9 @@ def discover(root: str | Path, record: str | Path | None = None) -> list[Session
         for s in sessions:
             files = tuple(sorted(p for p in s.iterdir() if p.is_file() and _visible(p)
                                  and p.suffix.lower() in RECORDING_SUFFIXES))  # fmt: skip
+            problem = no_record
             if not files:
-                raise LayoutError(
-                    f"session {w.name}/{s.name} holds no recordings (found {_listing(s)}); "
-                    f"{_EXPECTED}"
-                )
-            out.append(Session(w.name, s.name, files, rec))
+                problem = (f"session {w.name}/{s.name} holds no recordings (found "
+                           f"{_listing(s)}); {_EXPECTED}")  # fmt: skip
+            out.append(Session(w.name, s.name, files, rec, problem))
     return out

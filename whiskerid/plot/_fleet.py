@@ -21,10 +21,12 @@ def plot_fleet_history(
     centre: dict[str, float],
     band: dict[str, float],
     flagged: list[str],
+    began: dict[str, int] | None = None,
 ) -> Path:
     """Save one panel per parameter: each session's value with its 1σ, the single plucks,
-    the baseline sessions shaded, and the band around the baseline's centre within which no
-    change is flagged; flagged sessions in red.
+    the first reference sessions shaded, the band around the reference's centre within
+    which no single session's change is flagged, and where a change began; flagged sessions
+    in red.
 
     Args:
         path: PNG to write.
@@ -37,6 +39,7 @@ def plot_fleet_history(
         centre: Parameter → the baseline's centre.
         band: Parameter → half-width of the no-flag band.
         flagged: Flagged sessions.
+        began: Parameter → index of the session where its change began (a dashed line).
     """
     plt = _pyplot()
     names = [p for p in ("f1_hz", "zeta") if p in values]
@@ -52,7 +55,9 @@ def plot_fleet_history(
         if bad.any():
             ax.errorbar(x[bad], v[bad], e[bad], fmt="o", ms=5, color="C3", label="flagged")
         if baseline:
-            ax.axvspan(-0.5, baseline - 0.5, color="0.92", zorder=0, label="baseline")
+            ax.axvspan(-0.5, baseline - 0.5, color="0.92", zorder=0, label="first reference")
+        if began and p in began:
+            ax.axvline(began[p] - 0.5, color="C3", ls="--", lw=1, label="change began")
         if p in centre:
             m, h = centre[p], band[p]
             ax.axhline(m, color="C2", lw=0.8)

@@ -1,0 +1,136 @@
+"""A whisker's f1 and ζ from driving data (no pluck), and its drives in the fleet check.
+
+The fast tests drive a whisker written here with numpy alone: a single mode's response
+(FFT filtering by ``1/(ω₁² − ω² + 2iζω₁ω)``) to a coloured base acceleration whose spectrum
+every minute takes another slope and corner and another motor tone, plus white sensor noise.
+(A base spectrum with nulls near f1, as a wheel's contact patch makes at some speeds, is
+harder: the terrain simulator's drives in the slow test and the benchmark have them.)
+"""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from whiskerid.cli import main
+from whiskerid.fleet import check_fleet, identify_driving, read_table
+
+RATE = 200.0
+
+
+def _drive(rng, f1, zeta, minutes=10):
+    """``minutes`` one-minute recordings of a whisker driven over changing ground."""
+    out = []
+    n = int(60 * RATE)
+    f = np.fft.rfftfreq(n, 1 / RATE)
+    w, w1 = 2 * np.pi * f, 2 * np.pi * f1
+    h = 1.0 / (w1**2 - w**2 + 2j * zeta * w1 * w)
+    for k in range(minutes):
+        speed = rng.uniform(0.1, 0.3)
+        slope = rng.uniform(0.5, 2.5)
+        base = (1 + (f / rng.uniform(15, 60)) ** 2) ** (-slope / 2)
+        spec = np.fft.rfft(rng.standard_normal(n)) * (base + 1e-3)
+        y = np.fft.irfft(spec * h, n)
+        t = np.arange(n) / RATE
+        tone = 48 * speed / (2 * np.pi * 0.035)  # the motor's shaft
+        y += 0.2 * np.std(y) * np.sin(2 * np.pi * tone * t + rng.uniform(0, 6.3))
+        y += 0.02 * np.std(y) * rng.standard_normal(n)
+        out.append((f"minute-{k}", y))
+    return out
+
+
+@pytest.mark.parametrize("seed", [0, pytest.param(1, marks=pytest.mark.slow)])
+def test_f1_and_zeta_from_ten_minutes_of_driving(seed):
+    rng = np.random.default_rng(seed)
+    f1, zeta = rng.uniform(40, 50), rng.uniform(0.03, 0.06)
+    # started from a record 2 % off, as a whisker that has aged since its calibration
+    fit = identify_driving(_drive(rng, f1, zeta), RATE, 1.02 * f1, 0.04)
+    assert fit.status == "ok" and fit.seconds == pytest.approx(600)
+    assert abs(fit.f1_hz / f1 - 1) < 0.01 and abs(fit.zeta / zeta - 1) < 0.15
+    assert abs(fit.f1_hz - f1) < 4 * fit.f1_std and abs(fit.zeta - zeta) < 4 * fit.zeta_std
+
+
+def test_noise_alone_is_no_resonance():
+    rng = np.random.default_rng(3)
+    signals = [(f"m{k}", rng.standard_normal(int(60 * RATE))) for k in range(5)]
+    fit = identify_driving(signals, RATE, 45.0, 0.04)
+    assert fit.status in ("no resonance", "ok")
+    if fit.status == "ok":  # a fit to noise must not look sure of itself
+        assert fit.f1_std > 0.005 * fit.f1_hz or fit.zeta_std > 0.3 * fit.zeta
+
+
+def _save(folder, signals):
+    paths = []
+    for name, y in signals:
+        path = folder / f"{name}.csv"
+        t = np.arange(y.size) / RATE
+        np.savetxt(path, np.column_stack([t, y]), delimiter=",", header="t,adc", comments="",
+                   fmt="%.8g")  # fmt: skip
+        paths.append(path)
+    return paths
+
+
+@pytest.mark.slow  # four drives of ten minutes, each fitted
+def test_cli_drive_logs_sessions_and_check_flags_a_three_percent_drop(tmp_path, capsys):
+    from whiskerid.model import paper_record
+
+    record = tmp_path / "whisker.toml"
+    paper_record().save(record)
+    f1 = float(paper_record().whisker().natural_frequencies_hz[0])
+    fleet = tmp_path / "fleet"
+    rng = np.random.default_rng(7)
+    for s in range(4):  # weekly drives; the whisker's f1 drops 3 % before the fourth
+        truth = f1 * (1 + 0.002 * rng.normal()) * (0.97 if s == 3 else 1.0)
+        folder = tmp_path / f"drive-{s}"
+        folder.mkdir()
+        paths = _save(folder, _drive(rng, truth, 0.04, minutes=10))
+        args = [
+            "fleet",
+            "drive",
+            str(fleet),
+            *map(str, paths),
+            "--whisker-id",
+            "w1",
+            "--session",
+            f"2026-11-{3 + 7 * s:02d}",
+            "--whisker",
+            str(record),
+            "--json",
+        ]
+        assert main(args) == 0
+        out = json.loads(capsys.readouterr().out)
+        assert out["status"] == "ok" and abs(out["f1_hz"] / truth - 1) < 0.01
+    assert main(args) == 2  # the session is logged already
+    assert "--force" in capsys.readouterr().err
+    rows = read_table(fleet / "health.csv")
+    assert [r["session"] for r in rows] == [f"2026-11-{3 + 7 * s:02d}" for s in range(4)]
+    result = check_fleet([{**r, "source": "drive"} for r in rows])
+    assert {(f["session"], f["parameter"]) for f in result.flags} == {("2026-11-24", "f1_hz")}
+    (event,) = result.events
+    assert event["source"] == "drive" and math.isclose(event["size_pct"], -3, abs_tol=1.0)
+    assert main(["fleet", "check", str(fleet), "--json", "--no-plots"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["events"][0]["whisker"] == "w1"
+
+
+@pytest.mark.slow
+def test_ten_minutes_of_simulated_terrain_give_the_calibrated_values():
+    """Mixed terrains and speeds from the terrain simulator (the exact modal model, the Hall
+    sensor, the ADS1115 at 200 Hz): the values within 3σ of the record's. (The goal of f1
+    within 1 % and ζ within 15 % held on 6 and 5 of the benchmark's 6 drives; this drive's
+    f1 is 1.65 % high, 1.0σ, a wheel-patch null near f1 in several of its runs.)"""
+    from whiskerid.model import paper_record
+    from whiskerid.terrain import SPEEDS_MPS, TERRAINS, RunSpec, synthesize_runs
+
+    record = paper_record()
+    f1 = float(record.whisker().natural_frequencies_hz[0])
+    rng = np.random.default_rng(30)
+    specs = [RunSpec(TERRAINS[k % 7], float(rng.choice(SPEEDS_MPS)), k) for k in range(10)]
+    runs = synthesize_runs(specs, record=record, duration_s=60.0, seed=30)
+    signals = [(f"run-{k}", r.columns["adc"].astype(float)) for k, r in enumerate(runs)]
+    fit = identify_driving(signals, 200.0, f1, float(record.zeta))
+    assert fit.status == "ok"
+    zeta = float(record.zeta)
+    assert abs(fit.f1_hz - f1) < 3 * fit.f1_std and abs(fit.zeta - zeta) < 3 * fit.zeta_std
+    assert abs(fit.f1_hz / f1 - 1) < 0.02 and abs(fit.zeta / zeta - 1) < 0.25
