@@ -39,8 +39,8 @@ def check_speed_mps(value: float, what: str) -> float:
     v = float(value)
     if not (math.isfinite(v) and 0 <= v <= MAX_SPEED_MPS):
         raise ValueError(
-            f"{what}: speed {value!r} m/s is not a plausible robot speed (0 to "
-            f"{MAX_SPEED_MPS:g} m/s); give it in metres per second"
+            f"{what} {value!r}: not plausible as a robot speed (0 to {MAX_SPEED_MPS:g} m/s); "
+            "give it in metres per second"
         )
     return v
 

@@ -116,7 +116,7 @@ def test_an_implausible_speed_in_a_replayed_recording_is_refused(tmp_path, sine_
     fast = tmp_path / "fast.csv"
     fast.write_text(text)
     argv = ["stream", "--model", str(tmp_path / "m"), "--replay", str(fast), "--fast"]
-    _refused(capsys, argv, "speed_mps", "50", "not a plausible robot speed")
+    _refused(capsys, argv, "speed_mps", "50", "not plausible as a robot speed")
 
 
 def test_a_live_speed_beyond_any_robot_is_ignored_and_counted():
