@@ -164,6 +164,8 @@ def calibrate(
     max_steps: int = 400,
     f1_start_hz: float | None = None,
     start: dict | None = None,
+    model: str = "linear",
+    nl_terms: tuple[str, ...] | None = None,
 ) -> Calibration:
     """Fit κ (f_1), ζ and the nuisances to one or more recordings (and a static test).
 
@@ -183,6 +185,13 @@ def calibrate(
         start: Start parameters instead of the start search: a pytree of the problem's
             structure (``FitProblem.zero_params()``), e.g. from earlier fits of the same
             recordings.
+        model: ``linear`` (default; free decays are also tested for amplitude-dependent
+            frequency and damping, ``check`` when found), ``nonlinear`` (cubic stiffness and
+            amplitude-dependent damping of mode 1, free decays only: a
+            :class:`whiskerid.fit.NonlinearCalibration`) or ``auto`` (nonlinear when the
+            test rejects the linear fit). See :mod:`whiskerid.fit._amplitude`.
+        nl_terms: The nonlinear model's terms (default all: ``cubic``, ``quadratic``,
+            ``coulomb``).
 
     Returns:
         A :class:`Calibration`; never raises on a failed solve (see ``status``).
@@ -194,6 +203,8 @@ def calibrate(
         raise CalibrationError(f"pin must be one of {PINS}, not {pin!r}")
     if not 1 <= n_modes <= 10:
         raise CalibrationError(f"n_modes = {n_modes} must be between 1 and 10")
+    if model not in ("linear", "nonlinear", "auto"):
+        raise CalibrationError(f"model must be linear, nonlinear or auto, not {model!r}")
     pin = "geometry" if pin == "auto" else pin
     nominal = record.whisker().with_modes(n_modes)
     problem = FitProblem.from_observations(
@@ -278,7 +289,9 @@ def calibrate(
         covariance=cov,
     )
     out.record = _updated_record(record, out, pin, static, obs, problem)
-    return out
+    from ._amplitude import finish  # amplitude dependence and the choice of model
+
+    return finish(out, obs, model, nl_terms)
 
 
 def _blocks(jac, resid, obs):
