@@ -48,6 +48,15 @@ def add_calibrate(sub, command_error) -> None:
         default="levenberg-marquardt",
         help="least-squares solver (optimistix)",
     )
+    p.add_argument(
+        "--model",
+        choices=("linear", "nonlinear", "auto"),
+        default="linear",
+        help="linear (free decays are tested for amplitude-dependent frequency and damping: "
+        "'check' when found), nonlinear (mode 1 with cubic stiffness and amplitude-dependent "
+        "damping, free decays only: f1 and zeta at small amplitude plus the backbone f(a), "
+        "zeta(a)) or auto (nonlinear when the test rejects the linear fit)",
+    )
     p.add_argument("--plot", type=Path, help="save data, fit and residuals as this PNG")
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
@@ -181,6 +190,7 @@ def _cmd_calibrate(args, command_error, parser) -> dict:
         pin=args.pin,
         solver=args.solver,
         f1_start_hz=args.f1_start,
+        model=args.model,
     )
     _with_options(cal.record, args, parser).save(args.out)
     print(cal.report(), file=sys.stderr)

@@ -205,6 +205,11 @@ def calibrate(
         raise CalibrationError(f"n_modes = {n_modes} must be between 1 and 10")
     if model not in ("linear", "nonlinear", "auto"):
         raise CalibrationError(f"model must be linear, nonlinear or auto, not {model!r}")
+    if model == "nonlinear" and (static is not None or any(o.excitation != "decay" for o in obs)):
+        raise CalibrationError(
+            "the nonlinear model fits free decays only (no sine, base motion or static test); "
+            "fit those with --model linear"
+        )
     pin = "geometry" if pin == "auto" else pin
     nominal = record.whisker().with_modes(n_modes)
     problem = FitProblem.from_observations(
