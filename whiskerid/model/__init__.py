@@ -8,6 +8,8 @@ from ._modes import cantilever_roots as cantilever_roots
 from ._modes import mode_shape as mode_shape
 from ._modes import participation_factors as participation_factors
 from ._nonlinear import NonlinearMode as NonlinearMode
+from ._nonlinear import nonlinear_coefficients as nonlinear_coefficients
+from ._nonlinear import nonlinear_pluck_state as nonlinear_pluck_state
 from ._nonlinear import nonlinear_response as nonlinear_response
 from ._nonlinear import slow_flow as slow_flow
 from ._nonlinear import slow_flow_decay as slow_flow_decay

@@ -210,3 +210,53 @@ def nonlinear_response(
         max_steps=max_steps,
     )
     return sol.ys
+
+
+def nonlinear_coefficients(record) -> dict | None:
+    """The nonlinear coefficients a calibration stored in ``record`` (``[fit.nonlinear]``:
+    ``gamma_per_m2``, ``quadratic_per_m``, ``coulomb_m_s2`` for mode 1's tip amplitude), or
+    None for a linear record."""
+    nl = (record.extra.get("fit") or {}).get("nonlinear")
+    if not nl:
+        return None
+    return {k: float(nl.get(k, 0.0)) for k in ("gamma_per_m2", "quadratic_per_m", "coulomb_m_s2")}
+
+
+def nonlinear_pluck_state(whisker, t: Float[Array, " n"], q0, coefficients: dict):
+    """A pluck's modal state with mode 1 nonlinear (the ODE by diffrax), the others linear.
+
+    The coefficients are for mode 1's *tip* deflection ``u = φ₁(l) q₁``; in the modal
+    coordinate they become ``γφ₁(l)²``, ``c|φ₁(l)|`` and ``F/|φ₁(l)|``.
+
+    Args:
+        whisker: The whisker (mode 1's ``f₀`` and ``ζ₀`` are its first mode's).
+        t: Increasing times from the release (s).
+        q0: Modal displacements at the release (:func:`whiskerid.model.pluck`).
+        coefficients: As :func:`nonlinear_coefficients`.
+
+    Returns:
+        A :class:`whiskerid.model.ModalState`.
+    """
+    from ._modes import mode_shape
+    from ._response import free_decay
+
+    lin = free_decay(whisker, t, q0=q0)
+    phi = jnp.abs(mode_shape(whisker.beta, 1.0)[0])
+    mode = NonlinearMode(
+        f0_hz=whisker.natural_frequencies_hz[0],
+        zeta0=whisker.zeta[0],
+        gamma_per_m2=coefficients["gamma_per_m2"] * phi**2,
+        quadratic_per_m=coefficients["quadratic_per_m"] * phi,
+        coulomb_m_s2=coefficients["coulomb_m_s2"] / phi,
+    )
+    u, v = nonlinear_response(mode, t, q0[0], 0.0)
+    w0 = mode.omega0
+    acc = -(
+        2 * mode.zeta0 * w0 * v
+        + w0**2 * (u + mode.gamma_per_m2 * u**3)
+        + mode.quadratic_per_m * jnp.abs(v) * v
+        + mode.coulomb_m_s2 * jnp.tanh(v / 1e-6)
+    )
+    return lin._replace(
+        q=lin.q.at[:, 0].set(u), qd=lin.qd.at[:, 0].set(v), qdd=lin.qdd.at[:, 0].set(acc)
+    )
