@@ -113,6 +113,8 @@ def _columns(problem, opt):
             cubic = cubic + m1 * 2 * x0**2 * (e**2 - 1)
         quad = m1 * (-w0 * x0 * (1 - e) / sigma)
         coul = m1 * (-w0 * (1 / e - 1) / (sigma * x0))
+        if rec.observable != "acceleration":  # friction's square wave, its fundamental
+            coul = coul - 2 * q / (x0 * e)
         energy = np.cumsum(m1**2)
         t_half = t[int(np.searchsorted(energy, 0.5 * energy[-1]))]
         late = np.maximum(t - t_half, 0.0)

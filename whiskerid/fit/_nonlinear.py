@@ -120,6 +120,8 @@ class NonlinearProblem(eqx.Module):
                 re, im = conversion_average(mode.zeta0 * mode.omega0 + 0 * wd, wd, rec.avg_offsets)
                 c, s = c * re - s * im, s * re + c * im
             D = D.at[:, 2].set(c).at[:, 2 + nm].set(s)
+            if "coulomb" in self.terms and rec.observable != "acceleration":
+                g = g + _friction_offset(rec, p["c"][2], p["c"][2 + nm], phi, a, mode, obs)
             out.append((D, g, a))
         return out
 
@@ -147,6 +149,25 @@ class NonlinearProblem(eqx.Module):
             out[f"backbone_f_{i}"] = m.frequency_hz(amplitudes[i])
             out[f"backbone_zeta_{i}"] = m.zeta(amplitudes[i])
         return out
+
+
+def _friction_offset(rec, c_cos, c_sin, phi, a, mode, per_m):
+    """Dry friction's square wave in normalised observed units.
+
+    Each half-cycle oscillates about ``±F/ω₀²`` (the side the motion comes from), so the
+    deflection is ``a cos ψ + (F/ω₀²) sgn(sin ψ)`` with ``ψ`` the fitted mode-1 phase: a
+    component in quadrature (``4F/(πω₀²) sin ψ``) whose share grows as ``a`` falls, which the
+    averaged ``a cos φ`` alone would take for a drifting frequency. Its first two harmonics
+    are kept (the 5th is 1/5 of the 1st's 4F/(πω₀²)); an accelerometer does not see it
+    (``ü = −ω₀²(u ∓ F/ω₀²)``).
+    """
+    psi = phi - jnp.arctan2(c_sin, c_cos)
+    square = 4 / jnp.pi * (jnp.sin(psi) + jnp.sin(3 * psi) / 3)
+    # once friction holds the whisker it stays off-centre, on the side it last came from
+    last = jnp.maximum(jnp.sum(a > 0) - 1, 0)
+    square = jnp.where(a > 0, square, jnp.sign(jnp.sin(psi[last])))
+    offset = mode.coulomb_m_s2 / mode.omega0**2  # m at the tip
+    return jnp.abs(rec.scale) * per_m * offset * square
 
 
 def _observed_per_metre(rec, mode, whisker):
