@@ -146,6 +146,18 @@ def _pluck(rate=860.0, rise=0.004, zq=0.25, seed=0, duration=None):
     return record, Observation(t, y, observable="voltage", gain=gain), truth
 
 
+def test_model_choice_is_checked_before_fitting():
+    from whiskerid.fit import CalibrationError, StaticTest
+
+    record, obs, _ = _pluck(rate=200.0, duration=0.2)
+    with pytest.raises(CalibrationError, match="model must be"):
+        calibrate(record, obs, model="quadratic")
+    static = StaticTest(force_n=np.array([0.0, 0.01, 0.02]),
+                        deflection_m=np.array([0.0, 1e-3, 2e-3]))  # fmt: skip
+    with pytest.raises(CalibrationError, match="free decays only"):
+        calibrate(record, obs, static=static, model="nonlinear")
+
+
 @pytest.mark.slow
 def test_gradients_through_the_fit_forward_model():
     """check_grads of the nonlinear fit's residuals (slow flow in the loop) in all

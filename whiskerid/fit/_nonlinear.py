@@ -486,6 +486,9 @@ def _updated_record(cal: NonlinearCalibration):
     p = cal.params
     fit["status"] = cal.status
     fit["model"] = "nonlinear"
+    fit.pop("warnings", None)  # the linear fit's
+    if cal.warnings:
+        fit["warnings"] = list(cal.warnings)
     fit["params"] = {k: {"value": v["value"], "std": v["std"], "source": v["source"]}
                      for k, v in p.items()}  # fmt: skip
     fit["nonlinear"] = {
