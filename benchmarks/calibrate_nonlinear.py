@@ -237,11 +237,14 @@ def main(argv=None):
     ap.add_argument("--project-plucks", type=int, default=12,
                     help="linear plucks by the project's simulator (false alarms)")  # fmt: skip
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--rates", type=float, nargs="+", default=[200.0, 860.0],
+                    help="sampling rates (Hz) of the SciPy plucks")  # fmt: skip
+    ap.add_argument("--kinds", nargs="+", default=list(KINDS), choices=list(KINDS))
     ap.add_argument("--out", help="also write the per-case rows here (JSON)")
     args = ap.parse_args(argv)
     rows = []
-    for rate in (200.0, 860.0):
-        for kind in KINDS:
+    for rate in args.rates:
+        for kind in args.kinds:
             for s in range(args.seeds):
                 rows.append(run_nonlinear(kind, rate, args.seed + s))
                 r = rows[-1]
