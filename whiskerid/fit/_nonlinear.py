@@ -33,12 +33,13 @@ from jaxtyping import Array
 
 from ..model import NonlinearMode, mode_shape, slow_flow
 from . import _lsq as _lsq
-from ._calibrate import Calibration, _blocks, _poor_fit_warnings
+from ._calibrate import GTOL, Calibration, _blocks, _poor_fit_warnings
 from ._checks import check_fit, decay_rates, hac_covariance, no_smaller_than, residual_peak
 from ._checks import lag1 as lag1_autocorr
 from ._decay import conversion_average
 from ._observation import CalibrationError
 from ._problem import FitProblem, recording_design
+from ._short_windows import short_window_points
 
 #: The nonlinear terms, in the order of the parameter vector ``nl``.
 NL_TERMS = ("cubic", "quadratic", "coulomb")
@@ -306,8 +307,6 @@ def calibrate_nonlinear(
     s2 = float(_lsq.residual_variance(resid_w, res.value.size))
     cov_white = s2 * bread
     gcos = float(_lsq.gradient_cosine_from(jac, resid_w))
-    from ._calibrate import GTOL
-
     converged = bool(res.ok) or gcos < GTOL
     ok = converged and bool(np.all(np.isfinite(np.diag(cov_white))))
     status = "ok" if ok else ("non-finite" if not np.isfinite(float(res.cost)) else "not converged")
@@ -320,7 +319,7 @@ def calibrate_nonlinear(
     per_rec, curves, envelopes = _per_recording(problem, optimum, obs)
     grid = _amplitude_grid(envelopes, per_rec)
     params, corr, backbone = _report(problem, res.value, cov, cov_white, grid, linear)
-    backbone["windows"] = _window_points(obs, per_rec, float(params["f1_hz"]["value"]), w0)
+    backbone["windows"] = short_window_points(obs, per_rec, float(params["f1_hz"]["value"]))
     diagnostics = {
         "model": "nonlinear",
         "rms_residual": [r["rms_residual"] for r in per_rec],
@@ -468,14 +467,6 @@ def _report(problem, flat, cov, cov_white, grid, linear):
         "matrix": np.round(np.nan_to_num(corr), 6).tolist(),
     }
     return params, correlations, bb
-
-
-def _window_points(obs, per_rec, f1_hz: float, w0: float) -> dict:
-    """Short-window damped-sine fits of each recording: ``f``, ``ζ`` against the window's
-    starting amplitude (m), for comparison with the fitted backbone."""
-    from ._short_windows import short_window_points
-
-    return short_window_points(obs, per_rec, f1_hz, w0)
 
 
 def _updated_record(cal: NonlinearCalibration):

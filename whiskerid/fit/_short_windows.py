@@ -16,15 +16,15 @@ WINDOW_PERIODS = 8
 WINDOW_MIN_SAMPLES = 24
 
 
-def short_window_points(obs, per_rec: list[dict], f1_hz: float, w0: float) -> dict:
+def short_window_points(obs, per_rec: list[dict], f1_hz: float) -> dict:
     """Window fits of every recording, as ``amplitude_m``, ``f_hz``, ``zeta`` lists.
 
     Args:
         obs: The recordings (free decays).
-        per_rec: Per recording ``noise_amplitude_m`` and the amplitude conversion: the
-            ratio ``amplitude_start_m`` to the first window's observed amplitude is used.
+        per_rec: Per recording ``noise_amplitude_m`` (the residual RMS as a mode-1 tip
+            amplitude) and ``rms_residual`` (observed units): their ratio converts an
+            observed amplitude to metres at the tip.
         f1_hz: The fitted f_1 (sets the window length).
-        w0: ω of the first mode (rad/s; the amplitude of an accelerometer is ``A/ω²``).
 
     Returns:
         Lists (one entry per window that converged above three times the noise amplitude).
