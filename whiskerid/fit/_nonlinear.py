@@ -73,9 +73,11 @@ class NonlinearProblem(eqx.Module):
         return p
 
     def flatten(self, params) -> Array:
+        """The parameter pytree as one flat vector (the solver's and covariance's order)."""
         return ravel_pytree(params)[0]
 
     def unflatten(self, flat) -> dict:
+        """Inverse of :meth:`flatten`."""
         return ravel_pytree(self.zero_params())[1](flat)
 
     def scaled(self, params) -> dict[str, Array]:
@@ -240,12 +242,14 @@ class NonlinearCalibration(Calibration):
     linear: Calibration | None = field(default=None, repr=False)
 
     def to_json(self) -> dict:
+        """The linear fit's JSON summary plus ``model`` and ``backbone``."""
         out = super().to_json()
         out["model"] = "nonlinear"
         out["backbone"] = self.backbone
         return out
 
     def report(self) -> str:
+        """The console report with the backbone's table at the end."""
         b = self.backbone
         lines = [super().report(), "[[Backbone]] (a: mode 1 tip amplitude)"]
         for i, a in enumerate(b["amplitude_m"]):
