@@ -58,6 +58,15 @@ def add_calibrate(sub, command_error) -> None:
         help="least-squares solver (optimistix)",
     )
     p.add_argument(
+        "--model",
+        choices=("linear", "nonlinear", "auto"),
+        default="linear",
+        help="linear (free decays are tested for amplitude-dependent frequency and damping: "
+        "'check' when found), nonlinear (mode 1 with cubic stiffness and amplitude-dependent "
+        "damping, free decays only: f1 and zeta at small amplitude plus the backbone f(a), "
+        "zeta(a)) or auto (nonlinear when the test rejects the linear fit)",
+    )
+    p.add_argument(
         "--plot",
         type=Path,
         help="save data, fit and residuals as this PNG (with added masses: the decays without "
@@ -209,6 +218,7 @@ def _cmd_calibrate(args, command_error, parser) -> dict:
         f1_start_hz=args.f1_start,
         added_mass=masses,
         modulus_tolerance=args.modulus_tolerance,
+        model=args.model,
     )
     progress_step("writing")
     _with_options(cal.record, args, parser).save(args.out)

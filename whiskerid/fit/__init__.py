@@ -35,6 +35,10 @@ from ._lsq import gradient_cosine as gradient_cosine
 from ._lsq import least_squares as least_squares
 from ._lsq import to_interval as to_interval
 from ._modulus import MODULUS_TOLERANCE as MODULUS_TOLERANCE
+from ._nonlinear import NL_TERMS as NL_TERMS
+from ._nonlinear import NonlinearCalibration as NonlinearCalibration
+from ._nonlinear import NonlinearProblem as NonlinearProblem
+from ._nonlinear import calibrate_nonlinear as calibrate_nonlinear
 from ._observation import G0 as G0
 from ._observation import CalibrationError as CalibrationError
 from ._observation import Observation as Observation

@@ -158,6 +158,8 @@ def calibrate(
     start: dict | None = None,
     added_mass: list | None = None,
     modulus_tolerance: float = MODULUS_TOLERANCE,
+    model: str = "linear",
+    nl_terms: tuple[str, ...] | None = None,
 ) -> Calibration:
     """Fit κ (f_1), ζ and the nuisances to one or more recordings (and a static test).
 
@@ -184,6 +186,13 @@ def calibrate(
             used.
         modulus_tolerance: Relative 1σ of the record's modulus under ``pin="material"``,
             carried into ρa's and C's 1σ (default 20 %, see ``whiskerid.fit._modulus``).
+        model: ``linear`` (default; free decays are also tested for amplitude-dependent
+            frequency and damping, ``check`` when found), ``nonlinear`` (cubic stiffness and
+            amplitude-dependent damping of mode 1, free decays only: a
+            :class:`whiskerid.fit.NonlinearCalibration`) or ``auto`` (nonlinear when the
+            test rejects the linear fit). See :mod:`whiskerid.fit._amplitude`.
+        nl_terms: The nonlinear model's terms (default all: ``cubic``, ``quadratic``,
+            ``coulomb``).
 
     Returns:
         A :class:`Calibration`; never raises on a failed solve (see ``status``).
@@ -192,6 +201,17 @@ def calibrate(
     if not obs:
         raise CalibrationError("no recordings to calibrate")
     modulus_tolerance = check_tolerance(modulus_tolerance)
+    if model not in ("linear", "nonlinear", "auto"):
+        raise CalibrationError(f"model must be linear, nonlinear or auto, not {model!r}")
+    if model == "nonlinear" and (static is not None or any(o.excitation != "decay" for o in obs)):
+        raise CalibrationError(
+            "the nonlinear model fits free decays only (no sine, base motion or static test); "
+            "fit those with --model linear"
+        )
+    if added_mass is not None and model != "linear":
+        raise CalibrationError(
+            "the added-mass method fits the linear model; leave out --model (or give linear)"
+        )
     if added_mass is not None:
         if static is not None:
             raise CalibrationError("give a static test or added masses, not both")
@@ -293,7 +313,9 @@ def calibrate(
         covariance=cov,
     )
     out.record = _updated_record(record, out, pin, static, obs, problem)
-    return out
+    from ._amplitude import finish  # amplitude dependence and the choice of model
+
+    return finish(out, obs, model, nl_terms)
 
 
 def _blocks(jac, resid, obs, correlated=True):

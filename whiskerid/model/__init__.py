@@ -7,6 +7,12 @@ from ._modes import PAPER_D as PAPER_D
 from ._modes import cantilever_roots as cantilever_roots
 from ._modes import mode_shape as mode_shape
 from ._modes import participation_factors as participation_factors
+from ._nonlinear import NonlinearMode as NonlinearMode
+from ._nonlinear import nonlinear_coefficients as nonlinear_coefficients
+from ._nonlinear import nonlinear_pluck_state as nonlinear_pluck_state
+from ._nonlinear import nonlinear_response as nonlinear_response
+from ._nonlinear import slow_flow as slow_flow
+from ._nonlinear import slow_flow_decay as slow_flow_decay
 from ._paper import paper_eq1 as paper_eq1
 from ._pluck import PLUCK_KINDS as PLUCK_KINDS
 from ._pluck import PluckTruth as PluckTruth

@@ -5,7 +5,9 @@ This is the engine behind ``whiskerid simulate``. Models:
 * ``paper``: Eq. 1 as printed (sine excitation only);
 * ``steady``: the exact modal model's harmonic steady state (sine only);
 * ``exact``: the exact modal model from rest: sine switched on at ``t = 0``, free decay
-  after a pluck, or an arbitrary sampled base motion.
+  after a pluck, or an arbitrary sampled base motion. A record calibrated with the
+  nonlinear model (a ``[fit.nonlinear]`` table) plays its pluck back with mode 1's cubic
+  stiffness and amplitude-dependent damping (:func:`whiskerid.model.nonlinear_pluck_state`).
 
 Observables: ``deflection`` (relative to the base, at the sensor, m), ``acceleration``
 (absolute, at the sensor, m/s²: an accelerometer on the beam), ``voltage`` (Hall sensor
@@ -23,6 +25,7 @@ import numpy as np
 
 from .._choices import EXCITATIONS, MODELS, OBSERVABLES, UNITS
 from ..io import Recording
+from ._nonlinear import nonlinear_coefficients, nonlinear_pluck_state
 from ._paper import paper_eq1
 from ._record import WhiskerRecord
 from ._response import (
@@ -84,6 +87,8 @@ def _signal_function(
         )
     if excitation == "decay":
         q0 = pluck(whisker, tip_deflection_m)
+        if nonlinear_coefficients(record) is not None:  # a nonlinear calibration: mode 1
+            return _nonlinear_decay(record, whisker, q0, observable, oversample_hz, t_end)
         return lambda t: observe(
             whisker,
             free_decay(whisker, jnp.maximum(t, 0.0), q0=q0),
@@ -107,6 +112,17 @@ def _signal_function(
     state = base_motion_response(whisker, jnp.asarray(grid), jnp.asarray(acc), uniform=True)
     values = observe(whisker, state, observable, absolute=absolute)
     return lambda t: jnp.interp(t, jnp.asarray(grid), values)
+
+
+def _nonlinear_decay(record, whisker, q0, observable, oversample_hz, t_end):
+    """A pluck with mode 1 nonlinear, solved on a fine grid and interpolated (the ADC's
+    averaging asks for times between samples)."""
+    dt = 1.0 / oversample_hz
+    end = t_end + 2 * dt if np.isfinite(t_end) else 10.0
+    grid = jnp.arange(0.0, end + 0.5 * dt, dt)
+    state = nonlinear_pluck_state(whisker, grid, q0, nonlinear_coefficients(record))
+    values = observe(whisker, state, observable, absolute=observable == "acceleration")
+    return lambda t: jnp.interp(jnp.maximum(t, 0.0), grid, values)
 
 
 def simulate(

@@ -19,13 +19,15 @@ def plot_calibration(path: str | Path, cal) -> Path:
     marked where the sampling puts them)."""
     plt = _pyplot()
     n = len(cal.curves)
+    backbone = getattr(cal, "backbone", None)  # a nonlinear fit: one more row
+    rows = n + (1 if backbone else 0)
     fig, axes = plt.subplots(
-        n, 4, figsize=(16, 3.0 * n), constrained_layout=True, squeeze=False,
+        rows, 4, figsize=(16, 3.0 * rows), constrained_layout=True, squeeze=False,
         gridspec_kw={"width_ratios": [1.3, 1.0, 1.0, 1.2]},
     )  # fmt: skip
     f1 = cal.params["f1_hz"]["value"]
     modes = [cal.params[k]["value"] for k in cal.params if k[0] == "f" and k.endswith("_hz")]
-    for row, (t, y, model), info in zip(axes, cal.curves, cal.per_recording, strict=True):
+    for row, (t, y, model), info in zip(axes[:n], cal.curves, cal.per_recording, strict=True):
         unit = UNITS.get(info["observable"], "")
         _time_panels(row[0], row[1], t, y, model, f1, info, unit)
         row[2].plot(t, y - model, lw=0.5, color="C3")
@@ -36,6 +38,12 @@ def plot_calibration(path: str | Path, cal) -> Path:
             fontsize=9,
         )
         _spectra(row[3], t, y, model, modes, unit)
+    if backbone:
+        from ._backbone import backbone_panels
+
+        backbone_panels(axes[n][0], axes[n][1], backbone)
+        for ax in axes[n][2:]:
+            ax.axis("off")
     p = cal.params
     fig.suptitle(
         f"{cal.record.name}: f1 = {p['f1_hz']['value']:.5g} ± {p['f1_hz']['std']:.2g} Hz, "

@@ -1,0 +1,221 @@
+"""The nonlinear mode: its ODE (diffrax) and slow flow against an independent SciPy
+integration and the harmonic-balance backbone, gradients through the fit's forward model,
+and the nonlinear calibration of decays made by SciPy."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from jax.test_util import check_grads
+from scipy.integrate import solve_ivp
+
+from whiskerid.fit import Observation, calibrate, nominal_gain
+from whiskerid.fit._nonlinear import NonlinearProblem, tip_per_sensor
+from whiskerid.model import (
+    NonlinearMode,
+    nonlinear_response,
+    paper_record,
+    slow_flow,
+    slow_flow_decay,
+)
+
+F0, Z0, A0 = 38.0, 0.02, 2e-3
+W0 = 2 * np.pi * F0
+
+
+def scipy_decay(t, gamma=0.0, c=0.0, friction=0.0, u0=A0, v0=0.0, zeta0=Z0, f0=F0):
+    """u(t) by SciPy, restarted at each velocity zero (exact sign of the friction)."""
+    w0 = 2 * np.pi * f0
+
+    def rhs(s, y, sgn):
+        u, v = y
+        return [v, -(2 * zeta0 * w0 * v + w0**2 * (u + gamma * u**3) + c * abs(v) * v
+                     + friction * sgn)]  # fmt: skip
+
+    def turn(s, y, sgn):
+        return y[1]
+
+    turn.terminal = True
+    out = np.zeros(t.size)
+    y, s0 = np.array([u0, v0]), t[0]
+    sgn = np.sign(v0) if v0 else -np.sign(u0)
+    while s0 < t[-1]:
+        turn.direction = -sgn
+        sol = solve_ivp(rhs, (s0, t[-1]), y, args=(sgn,), events=turn, rtol=1e-11,
+                        atol=1e-16, method="DOP853", dense_output=True)  # fmt: skip
+        sel = (t >= s0) & (t <= sol.t[-1])
+        out[sel] = sol.sol(t[sel])[0]
+        y, s0 = sol.y[:, -1].copy(), sol.t[-1]
+        if sol.status != 1:
+            break
+        y[1] = 0.0
+        if abs(w0**2 * (y[0] + gamma * y[0] ** 3)) <= friction:
+            out[t > s0] = y[0]
+            break
+        sgn = -sgn
+    return out
+
+
+def test_mode_checks_shapes_and_linear_limit():
+    with pytest.raises(ValueError, match="scalar"):
+        NonlinearMode(f0_hz=jnp.ones(2), zeta0=0.01)
+    m = NonlinearMode(F0, Z0)
+    t = jnp.arange(0, 0.5, 1 / 400)
+    # no nonlinear term: exactly the linear decay e^{-ζωt} cos ω_d t
+    lin = A0 * np.exp(-Z0 * W0 * t) * np.cos(W0 * np.sqrt(1 - Z0**2) * t)
+    np.testing.assert_allclose(slow_flow_decay(m, t, A0), lin, atol=1e-9 * A0)
+    assert float(m.zeta(1e-3)) == pytest.approx(Z0)
+
+
+def test_diffrax_and_slow_flow_against_scipy():
+    """Cubic stiffening (1 % at A0) and velocity-squared damping (ζ + 0.01 at A0)."""
+    m = NonlinearMode(F0, Z0, gamma_per_m2=0.01 * 8 / (3 * A0**2),
+                      quadratic_per_m=3 * np.pi * 0.01 / (4 * A0))  # fmt: skip
+    t = np.arange(0, 0.6, 1 / 200)
+    v0 = float(m.decay_rate(A0))  # the slow flow's phase 0 starts with this velocity
+    ref = scipy_decay(t, float(m.gamma_per_m2), float(m.quadratic_per_m), v0=v0)
+    u, _ = nonlinear_response(m, t, A0, v0)
+    np.testing.assert_allclose(u, ref, atol=1e-7 * A0)
+    # first-order averaging: errors of order (nonlinearity)² and the 3rd harmonic γa³/32
+    err = np.max(np.abs(np.asarray(slow_flow_decay(m, t, A0)) - ref))
+    assert err < 5e-3 * A0
+    # and much better than ignoring the nonlinearity (the linear decay)
+    lin = np.asarray(slow_flow_decay(NonlinearMode(F0, Z0), t, A0))
+    assert np.max(np.abs(lin - ref)) > 10 * err
+
+
+def test_coulomb_slow_flow_against_scipy_and_exact_decrement():
+    """Dry friction: the amplitude falls by exactly 4F/ω₀² per cycle (no viscous part)."""
+    friction = 0.003 * np.pi * W0**2 * A0 / 2
+    m = NonlinearMode(F0, 0.0, coulomb_m_s2=friction)
+    period = 1 / F0
+    a, _ = slow_flow(m, jnp.asarray([0.0, 5 * period]), A0)
+    assert float(A0 - a[1]) / 5 == pytest.approx(4 * friction / W0**2, rel=1e-9)
+    m = NonlinearMode(F0, Z0, coulomb_m_s2=friction)
+    t = np.arange(0, 1.5, 1 / 200)
+    ref = scipy_decay(t, friction=friction, v0=float(m.decay_rate(A0)))
+    assert np.max(np.abs(np.asarray(slow_flow_decay(m, t, A0)) - ref)) < 1e-2 * A0
+
+
+@pytest.mark.slow
+def test_backbone_against_harmonic_balance():
+    """Undamped Duffing free vibration (diffrax): its frequency at amplitude a against
+    ω(a) = ω₀(1 + 3γa²/8), and against the second-order Lindstedt–Poincaré result for the
+    peak amplitude, ω₀(1 + 3γa²/8 − 21(γa²)²/256), more closely still."""
+    shift = 0.01
+    gamma = shift * 8 / (3 * A0**2)
+    m = NonlinearMode(F0, 0.0, gamma_per_m2=gamma)
+    t = np.linspace(0, 10 / F0, 5001)
+    u, _ = nonlinear_response(m, t, A0, 0.0)
+    u = np.asarray(u)
+    up = np.flatnonzero((u[:-1] < 0) & (u[1:] >= 0))
+    tz = t[up] - u[up] * (t[up + 1] - t[up]) / (u[up + 1] - u[up])
+    f_measured = (tz.size - 1) / (tz[-1] - tz[0])
+    second = 21 * (gamma * A0**2) ** 2 / 256
+    assert abs(f_measured / float(m.frequency_hz(A0)) - 1) < 1.5 * second
+    assert f_measured / (F0 * (1 + shift - second)) - 1 == pytest.approx(0, abs=0.2 * second)
+
+
+def test_zeta_of_amplitude_is_equivalent_linearisation():
+    c, friction = 3.0, 0.5
+    m = NonlinearMode(F0, Z0, quadratic_per_m=c, coulomb_m_s2=friction)
+    a = 1e-3
+    ratio = float(m.omega(a)) / W0
+    expected = Z0 + 4 * c * a * ratio / (3 * np.pi) + 2 * friction / (np.pi * W0**2 * a) / ratio
+    assert float(m.zeta(a)) == pytest.approx(expected, rel=1e-12)
+
+
+def _pluck(rate=860.0, rise=0.004, zq=0.25, seed=0, duration=None):
+    """A voltage pluck of the paper whisker's first mode by SciPy (40 dB)."""
+    record = paper_record()
+    w = record.whisker().with_modes(1)
+    f0 = float(w.natural_frequencies_hz[0])
+    ratio = float(tip_per_sensor(w, record.sensor_position_m))
+    a_s = 2e-3 / ratio
+    zeta0 = 0.031
+    gamma = rise * 8 / (3 * a_s**2)
+    c = 3 * np.pi * zq * zeta0 / (4 * a_s)
+    rng = np.random.default_rng(seed)
+    duration = duration or 4.6 / (2 * np.pi * f0 * zeta0)
+    t = np.arange(0, duration, 1 / rate) + rng.uniform(0, 1 / rate)
+    u = scipy_decay(np.concatenate([[0.0], t]), gamma, c, u0=a_s, zeta0=zeta0, f0=f0)[1:]
+    gain = nominal_gain(record, "voltage")
+    y = 1.65 + gain * u + rng.normal(0, np.std(gain * u) / 100, t.size)
+    truth = {"f1_hz": f0, "zeta": zeta0, "gamma_per_m2": gamma / ratio**2,
+             "quadratic_per_m": c / ratio}  # fmt: skip
+    return record, Observation(t, y, observable="voltage", gain=gain), truth
+
+
+def test_model_choice_is_checked_before_fitting():
+    from whiskerid.fit import CalibrationError, StaticTest
+
+    record, obs, _ = _pluck(rate=200.0, duration=0.2)
+    with pytest.raises(CalibrationError, match="model must be"):
+        calibrate(record, obs, model="quadratic")
+    static = StaticTest(force_n=np.array([0.0, 0.01, 0.02]),
+                        deflection_m=np.array([0.0, 1e-3, 2e-3]))  # fmt: skip
+    with pytest.raises(CalibrationError, match="free decays only"):
+        calibrate(record, obs, static=static, model="nonlinear")
+
+
+@pytest.mark.slow
+def test_gradients_through_the_fit_forward_model():
+    """check_grads of the nonlinear fit's residuals (slow flow in the loop) in all
+    parameters, at a point with every nonlinear term switched on."""
+    record, obs, _ = _pluck(rate=200.0, duration=0.2)
+    from whiskerid.fit import FitProblem
+
+    base = FitProblem.from_observations(record, [obs], n_modes=1)
+    problem = NonlinearProblem(base=base, a_ref=jnp.asarray(2e-3), terms=("cubic", "quadratic",
+                                                                         "coulomb"))  # fmt: skip
+    p = problem.zero_params()
+    p["log_kappa"] = jnp.log(float(record.whisker().kappa))
+    p["zeta_u"] = jnp.asarray(-3.4)  # ζ₀ ≈ 0.03
+    p["recs"][0]["c"] = jnp.asarray([0.01, 0.0, 1.2, 0.3])
+    p["nl"] = jnp.asarray([0.004, 0.008, 0.0005])
+    p = jax.tree_util.tree_map(jnp.asarray, p)
+    flat = problem.flatten(p)
+    # smooth where checked: the envelope (m, at the tip) stays clear of friction's stop
+    envelope = problem.design(p)[0][2]
+    assert 0.05e-3 < float(envelope[-1]) < float(envelope[0]) < 1e-2
+
+    @jax.jit
+    def loss(f):
+        return jnp.sum(problem.residuals(problem.unflatten(f)) ** 2)
+
+    check_grads(loss, (flat,), order=1, modes=("fwd", "rev"), eps=1e-6, atol=1e-5, rtol=1e-5)
+
+
+@pytest.mark.slow
+def test_nonlinear_calibration_recovers_an_independent_pluck():
+    """A SciPy pluck with 0.4 % stiffening and ζ 1.25× at release: the linear fit is not
+    ok (the amplitude test names the damping), the nonlinear fit is ok and right within
+    3σ in f0, ζ0 and both coefficients; ``auto`` picks it."""
+    record, obs, truth = _pluck()
+    lin = calibrate(record, obs, n_modes=1)
+    assert lin.status != "ok"
+    assert "amplitude-dependent" in lin.checks
+    nl = calibrate(record, obs, n_modes=1, model="auto")
+    assert nl.status == "ok", nl.warnings
+    for name, value in truth.items():
+        p = nl.params[name]
+        assert abs(p["value"] - value) < 3 * p["std"], (name, p, value)
+    assert abs(nl.params["f1_hz"]["value"] / truth["f1_hz"] - 1) < 1.5e-3
+    assert abs(nl.params["zeta"]["value"] / truth["zeta"] - 1) < 0.1
+    js = nl.to_json()
+    assert js["model"] == "nonlinear"
+    b = js["backbone"]
+    assert len(b["f_hz"]) == len(b["amplitude_m"]) == len(b["zeta_std"])
+    assert b["zeta"][-1] > b["zeta"][0]  # damping grows with amplitude
+    assert nl.record.extra["fit"]["nonlinear"]["gamma_per_m2"] > 0
+
+
+@pytest.mark.slow
+def test_linear_pluck_is_not_marked_amplitude_dependent():
+    """No nonlinear term: the amplitude test passes (several seeds and both rates)."""
+    for seed, rate in ((1, 200.0), (2, 860.0), (3, 860.0)):
+        record, obs, truth = _pluck(rate=rate, rise=0.0, zq=0.0, seed=seed)
+        lin = calibrate(record, obs, n_modes=1)
+        assert "amplitude-dependent" not in lin.checks, lin.diagnostics["amplitude_test"]
+        assert lin.status == "ok"
+        assert abs(lin.params["zeta"]["value"] - truth["zeta"]) < 4 * lin.params["zeta"]["std"]

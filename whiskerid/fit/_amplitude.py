@@ -1,0 +1,246 @@
+"""Does a linear fit of free decays hide amplitude dependence? A score test, and the choice
+of model.
+
+A linear fit averages a frequency that drifts and a damping that changes along a decay: its
+residuals then sit at the whisker's own frequency, where a lag-1 autocorrelation test is blind
+at low oversampling (lag-1 autocorrelation of a line at ``f`` is ``cos 2πf/f_s``), and its
+white-noise 1σ is far too small. Two score (Lagrange multiplier) tests at the linear optimum
+ask whether the data pull away from it, with no second fit:
+
+* **nonlinear terms**: the derivatives of the model in the slow-flow parameters of
+  :mod:`._nonlinear` at zero (``g``: frequency ``∝ a²``; ``ζ_v``: damping ``∝ a``; ``ζ_c``:
+  damping ``∝ 1/a``) are closed-form functions of time times the fitted mode-1 signal
+  (``∂φ/∂g = ω₀x₀²(1−e^{−2σt})/(2σ)``, ``∂ln a/∂ζ_v = −ω₀x₀(1−e^{−σt})/σ``,
+  ``∂ln a/∂ζ_c = −ω₀(e^{σt}−1)/(σx₀)``, ``x₀ = a₀/a_ref``);
+* **early against late**: a change of ``ζ`` and of ``f`` after the time that splits the
+  decay's signal energy in two (``∂ln a/∂δζ = −ω₀(t−t_½)₊``, ``∂φ/∂(δf/f) = ω₀(t−t_½)₊``).
+
+Each set of columns ``Z`` is projected off the linear Jacobian ``J`` (``Z⊥``); the score
+``S = Z⊥ᵀr`` has the HAC (Newey–West) variance ``V`` of its per-sample terms (with the
+residuals that one Gauss–Newton step along ``[J, Z]`` leaves, so that a misfit the
+alternative explains does not widen its own yardstick), so that correlated noise does not
+fake a detection, and ``T = SᵀV⁻¹S`` is χ² with as many degrees of
+freedom as columns under a linear whisker. A statistic beyond its χ² quantile at
+:data:`P_FALSE` marks the linear fit ``check``; a Gauss–Newton step along ``[J, Z]`` estimates
+what the data found (``ζ`` and ``f`` at the largest and smallest amplitudes, or early and
+late), and the message says it.
+"""
+
+import numpy as np
+from scipy.stats import chi2
+
+from ._checks import hac_covariance
+from ._lsq import to_interval
+from ._nonlinear import tip_per_sensor
+from ._problem import ZETA_MAX, residuals_and_jacobian
+
+#: False-alarm probability of each test on a linear whisker.
+P_FALSE = 1e-4
+#: Columns of each test.
+NONLINEAR = ("cubic", "quadratic", "coulomb")
+SPLIT = ("zeta-late", "f-late")
+
+
+def applies(cal) -> bool:
+    """Whether the test applies: a converged fit of free decays only, no static test."""
+    p = cal.problem
+    return (
+        cal.ok
+        and p is not None
+        and p.static_test is None
+        and all(r.excitation == "decay" for r in p.recordings)
+    )
+
+
+def amplitude_test(cal) -> dict:
+    """Score tests of a linear calibration (see the module docstring).
+
+    Returns:
+        ``{"nonlinear": {...}, "split": {...}, "rejects": bool, "message": str}``; each test
+        has its statistic ``T``, degrees of freedom, p-value, and the Gauss–Newton estimates.
+    """
+    problem, opt = cal.problem, cal.optimum
+    flat = problem.flatten(opt)
+    r, jac = (np.asarray(a) for a in residuals_and_jacobian(problem, flat))
+    cols, info = _columns(problem, opt)
+    out = {}
+    for name in ("nonlinear", "split"):
+        z = np.concatenate([c[name] for c in cols], axis=0)
+        step = _gauss_newton(jac, r, z)
+        # the score's variance from the residuals the alternative leaves (a Wald-type
+        # estimate): a misfit the nonlinear terms explain does not widen its own yardstick
+        r_alt = r + np.concatenate([jac, z], axis=1) @ step
+        out[name] = _score(jac, r, r_alt, z, [c["n"] for c in cols])
+        out[name]["step"] = step[-z.shape[1] :].tolist()
+        out[name]["linear_step"] = problem.unflatten(step[: jac.shape[1]])
+    nl, sp = out["nonlinear"], out["split"]
+    out["rejects"] = bool(nl["p_value"] < P_FALSE or sp["p_value"] < P_FALSE)
+    out["message"] = _message(cal, problem, opt, out, info) if out["rejects"] else ""
+    for k in ("nonlinear", "split"):
+        out[k].pop("linear_step")
+    return out
+
+
+def _columns(problem, opt):
+    """Score columns per recording (weighted like the residuals) and the amplitudes."""
+    w = problem.whisker(opt)
+    nm = problem.n_modes
+    w0 = float(w.omega_rad_s[0])
+    z0 = float(w.zeta[0])
+    sigma = z0 * w0
+    designs = problem.design(opt)
+    amps, per_ms = [], []
+    for rec, p in zip(problem.recordings, opt["recs"], strict=True):
+        per_m = (w0**2 if rec.observable == "acceleration" else 1.0) / float(
+            tip_per_sensor(w, rec.x_m)
+        )
+        per_ms.append(per_m)
+        amps.append(float(np.hypot(p["c"][2], p["c"][2 + nm])) / (abs(float(rec.scale)) * per_m))
+    a_ref = max(amps)
+    out = []
+    for (D, _), rec, p, a0, per_m in zip(designs, problem.recordings, opt["recs"], amps, per_ms,
+                                         strict=True):  # fmt: skip
+        D, c, t = np.asarray(D), np.asarray(p["c"]), np.asarray(rec.t)
+        wgt = float(rec.weight)
+        m1 = D[:, 2] * c[2] + D[:, 2 + nm] * c[2 + nm]
+        q = D[:, 2] * c[2 + nm] - D[:, 2 + nm] * c[2]  # ∂m1/∂φ
+        x0 = a0 / a_ref
+        e = np.exp(-sigma * t)
+        dphi_g = w0 * x0**2 * (1 - e**2) / (2 * sigma)
+        cubic = q * dphi_g
+        if rec.observable == "acceleration":  # ω(a)² scales an accelerometer's amplitude
+            cubic = cubic + m1 * 2 * x0**2 * (e**2 - 1)
+        quad = m1 * (-w0 * x0 * (1 - e) / sigma)
+        coul = m1 * (-w0 * (1 / e - 1) / (sigma * x0))
+        if rec.observable != "acceleration":  # friction's square wave, its fundamental
+            coul = coul - 2 * q / (x0 * e)
+        energy = np.cumsum(m1**2)
+        t_half = t[int(np.searchsorted(energy, 0.5 * energy[-1]))]
+        late = np.maximum(t - t_half, 0.0)
+        cols = {
+            "cubic": cubic, "quadratic": quad, "coulomb": coul,
+            "zeta-late": m1 * (-w0 * late), "f-late": q * (w0 * late),
+        }  # fmt: skip
+        z = {k: wgt * np.stack([cols[n] for n in names], axis=1)
+             for k, names in (("nonlinear", NONLINEAR), ("split", SPLIT))}  # fmt: skip
+        z["n"] = t.size
+        z["a_end"] = a0 * float(e[-1])
+        z["t_half"] = float(t_half)
+        resid_rms = float(np.std(np.asarray(rec.y) - D @ c))
+        z["noise_m"] = np.sqrt(2) * resid_rms / (abs(float(rec.scale)) * per_m)
+        out.append(z)
+    info = {"a_ref": a_ref, "w0": w0, "zeta0": z0, "cols": out}
+    return out, info
+
+
+def _project(jac, z):
+    """``Z`` minus its least-squares fit by the columns of ``J`` (column-scaled)."""
+    scale = np.linalg.norm(jac, axis=0)
+    scale = np.where(scale > 0, scale, 1.0)
+    coef, *_ = np.linalg.lstsq(jac / scale, z, rcond=None)
+    return z - (jac / scale) @ coef
+
+
+def _score(jac, r, r_alt, z, sizes):
+    zp = _project(jac, z)
+    scale = np.linalg.norm(zp, axis=0)
+    scale = np.where(scale > 0, scale, 1.0)
+    zp = zp / scale
+    blocks, start = [], 0
+    for n in sizes:
+        blocks.append((zp[start : start + n], r_alt[start : start + n], True))
+        start += n
+    meat, lag = hac_covariance(blocks, np.eye(zp.shape[1]))
+    white = float(np.mean(r_alt**2)) * (zp.T @ zp)
+    # never more certain than white noise would make it
+    v = np.maximum(np.diag(meat), np.diag(white))
+    sd = np.sqrt(np.maximum(np.diag(meat), 1e-300))
+    corr = meat / np.outer(sd, sd)
+    v = corr * np.sqrt(np.outer(v, v))
+    s = zp.T @ r
+    stat = float(s @ np.linalg.solve(v, s))
+    k = z.shape[1]
+    return {"statistic": stat, "dof": k, "p_value": float(chi2.sf(stat, k)), "hac_lag": lag}
+
+
+def _gauss_newton(jac, r, z):
+    """One Gauss–Newton step along ``[J, Z]`` from the linear optimum (minimising
+    ``|r + [J, Z]δ|²``)."""
+    a = np.concatenate([jac, z], axis=1)
+    scale = np.linalg.norm(a, axis=0)
+    scale = np.where(scale > 0, scale, 1.0)
+    step, *_ = np.linalg.lstsq(a / scale, -r, rcond=None)
+    return step / scale
+
+
+def _message(cal, problem, opt, out, info) -> str:
+    """What the data found, in the units of the report."""
+    nl, sp = out["nonlinear"], out["split"]
+    f1 = float(cal.params["f1_hz"]["value"])
+    if nl["p_value"] <= sp["p_value"]:
+        lin = nl["linear_step"]
+        zeta0 = float(to_interval(opt["zeta_u"] + lin["zeta_u"], 0.0, ZETA_MAX).ravel()[0])
+        f0 = f1 * float(np.exp(0.5 * np.ravel(lin["log_kappa"])[0]))
+        g, zv, zc = nl["step"]
+        a_ref = info["a_ref"]
+        lo = max(min(max(c["a_end"], 3 * c["noise_m"]) for c in info["cols"]), a_ref / 30)
+        parts = []
+        for a in (a_ref, lo):
+            x = a / a_ref
+            parts.append((a, zeta0 + zv * x + zc / x, f0 * (1 + g * x**2)))
+        (a1, z1, f_1), (a2, z2, f_2) = parts
+        verb = "falls" if z2 < z1 else "rises"
+        fverb = "falls" if f_2 < f_1 else "rises"
+        return (
+            f"the decay is not linear (score test p = {nl['p_value']:.2g}): zeta {z1:.3g} at "
+            f"{_mm(a1)} {verb} to {z2:.3g} at {_mm(a2)}, f1 {f_1:.5g} Hz {fverb} to {f_2:.5g} Hz: "
+            "amplitude-dependent damping and stiffness; fit with --model nonlinear"
+        )
+    lin = sp["linear_step"]
+    zeta_e = float(to_interval(opt["zeta_u"] + lin["zeta_u"], 0.0, ZETA_MAX).ravel()[0])
+    f_e = f1 * float(np.exp(0.5 * np.ravel(lin["log_kappa"])[0]))
+    dz, df = sp["step"]
+    t_half = min(c["t_half"] for c in info["cols"])
+    return (
+        f"early and late parts of the decay disagree (score test p = {sp['p_value']:.2g}): zeta "
+        f"{zeta_e:.3g} and f1 {f_e:.5g} Hz before {t_half:.3g} s, zeta {zeta_e + dz:.3g} and f1 "
+        f"{f_e * (1 + df):.5g} Hz after; fit with --model nonlinear"
+    )
+
+
+def _mm(a_m: float) -> str:
+    """An amplitude in mm (or µm when small)."""
+    return f"{a_m * 1e3:.3g} mm" if a_m >= 1e-4 else f"{a_m * 1e6:.3g} um"
+
+
+# --------------------------------------------------------------------------- model choice
+MODELS = ("linear", "nonlinear", "auto")
+
+
+def finish(cal, observations, model: str, terms=None):
+    """The calibration ``model`` asks for, from the linear one ``cal``.
+
+    ``linear``: ``cal``, marked ``check`` (``amplitude-dependent``) when the score tests
+    reject it; ``nonlinear``: the nonlinear fit started at ``cal``; ``auto``: the nonlinear
+    fit when the tests reject the linear one, else ``cal``. The test's figures are in
+    ``diagnostics["amplitude_test"]`` of the linear fit.
+    """
+    from ._nonlinear import NL_TERMS, calibrate_nonlinear
+
+    test = None
+    if applies(cal):
+        test = amplitude_test(cal)
+        cal.diagnostics["amplitude_test"] = {
+            k: {kk: vv for kk, vv in v.items() if kk != "step"} if isinstance(v, dict) else v
+            for k, v in test.items()
+        }
+        if test["rejects"]:
+            cal.checks["amplitude-dependent"] = test["message"]
+            cal.warnings.append(f"amplitude-dependent: {test['message']}")
+            if cal.status == "ok":
+                cal.status = "check"
+            cal.record.extra["fit"]["status"] = cal.status
+            cal.record.extra["fit"]["warnings"] = list(cal.warnings)
+    if model == "linear" or (model == "auto" and not (test and test["rejects"])):
+        return cal
+    return calibrate_nonlinear(cal, observations, terms=terms or NL_TERMS)

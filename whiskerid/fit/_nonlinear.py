@@ -1,0 +1,499 @@
+"""Calibrate a weakly nonlinear whisker: f₀, ζ₀ and the backbone ``f(a)``, ``ζ(a)``.
+
+The first mode of each free decay is the slow flow of :class:`whiskerid.model.NonlinearMode`
+(cubic stiffness, velocity-squared and Coulomb damping): ``a(t) cos φ(t)`` in place of the
+linear fit's ``e^{−ζω t} cos ω_d t`` columns; higher modes, offset and drift stay as in the
+linear fit (:mod:`._problem`). Its amplitude ``a`` is the first mode's tip deflection (m):
+the fitted amplitude through the record's gain (divided by ``ω²`` for an accelerometer) is
+the mode's deflection where the recording reads it, scaled by the mode shape
+``φ₁(l)/φ₁(x)`` (:func:`tip_per_sensor`).
+
+Parameters are scaled by a reference amplitude ``a_ref`` (the largest starting amplitude of
+the recordings, from the linear fit), so that each is a small dimensionless number the data
+see directly:
+
+* ``g = 3γa_ref²/8``: relative frequency rise at ``a_ref``;
+* ``ζ_v = 4c·a_ref/(3π)``: velocity-squared damping's ``ζ`` at ``a_ref``;
+* ``ζ_c = 2F/(πω₀²a_ref)``: friction's ``ζ`` at ``a_ref`` (it grows as ``a_ref/a``).
+
+At ``g = ζ_v = ζ_c = 0`` the model is the linear one exactly, so the linear optimum starts
+the Levenberg–Marquardt fit of all parameters (optimistix). The covariance is the HAC
+(Newey–West) sandwich at the optimum, never below the white-noise ``s²(JᵀJ)⁻¹``: a first-
+order slow flow leaves small harmonics in the residuals, and real recordings leave more.
+"""
+
+from dataclasses import dataclass, field
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.flatten_util import ravel_pytree
+from jaxtyping import Array
+
+from ..model import NonlinearMode, mode_shape, slow_flow
+from . import _lsq as _lsq
+from ._calibrate import GTOL, Calibration, _blocks, _poor_fit_warnings
+from ._checks import check_fit, decay_rates, hac_covariance, no_smaller_than, residual_peak
+from ._checks import lag1 as lag1_autocorr
+from ._decay import conversion_average
+from ._observation import CalibrationError
+from ._problem import FitProblem, recording_design
+from ._short_windows import short_window_points
+
+#: The nonlinear terms, in the order of the parameter vector ``nl``.
+NL_TERMS = ("cubic", "quadratic", "coulomb")
+#: Points of the reported backbone between the smallest and largest amplitudes.
+BACKBONE_POINTS = 9
+
+
+class NonlinearProblem(eqx.Module):
+    """A linear :class:`FitProblem` whose first mode follows the slow flow.
+
+    Attributes:
+        base: The linear problem (recordings, whisker, weights).
+        a_ref: Reference amplitude (m) that scales the nonlinear parameters.
+        terms: The nonlinear terms fitted (a subset of :data:`NL_TERMS`).
+    """
+
+    base: FitProblem
+    a_ref: Array
+    terms: tuple[str, ...] = eqx.field(static=True)
+
+    def __check_init__(self):
+        if jnp.shape(self.a_ref) != ():
+            raise ValueError("NonlinearProblem.a_ref must be a scalar")
+        if not self.terms or any(t not in NL_TERMS for t in self.terms):
+            raise ValueError(f"terms must be a non-empty subset of {NL_TERMS}")
+
+    def zero_params(self) -> dict:
+        """The linear problem's pytree plus ``nl`` (one entry per term)."""
+        p = self.base.zero_params()
+        p["nl"] = np.zeros(len(self.terms))
+        return p
+
+    def flatten(self, params) -> Array:
+        """The parameter pytree as one flat vector (the solver's and covariance's order)."""
+        return ravel_pytree(params)[0]
+
+    def unflatten(self, flat) -> dict:
+        """Inverse of :meth:`flatten`."""
+        return ravel_pytree(self.zero_params())[1](flat)
+
+    def scaled(self, params) -> dict[str, Array]:
+        """``g``, ``zeta_v``, ``zeta_c`` (zero for the terms not fitted)."""
+        out = {"g": 0.0, "zeta_v": 0.0, "zeta_c": 0.0}
+        keys = {"cubic": "g", "quadratic": "zeta_v", "coulomb": "zeta_c"}
+        for i, term in enumerate(self.terms):
+            out[keys[term]] = params["nl"][i]
+        return out
+
+    def mode(self, params) -> NonlinearMode:
+        """The first mode at ``params`` (physical coefficients from the scaled ones)."""
+        w = self.base.whisker(params)
+        s = self.scaled(params)
+        w0 = w.omega_rad_s[0]
+        a = self.a_ref
+        return NonlinearMode(
+            f0_hz=w0 / (2 * jnp.pi),
+            zeta0=w.zeta[0],
+            gamma_per_m2=8 * s["g"] / (3 * a**2),
+            quadratic_per_m=3 * jnp.pi * s["zeta_v"] / (4 * a),
+            coulomb_m_s2=jnp.pi * w0**2 * s["zeta_c"] * a / 2,
+        )
+
+    def design(self, params) -> list[tuple[Array, Array, Array]]:
+        """``(D, g, a)`` per recording: the linear design with mode 1's two columns replaced
+        by the slow flow's, and the envelope ``a(t)`` (m)."""
+        w = self.base.whisker(params)
+        mode = self.mode(params)
+        nm = self.base.n_modes
+        out = []
+        for rec, p in zip(self.base.recordings, params["recs"], strict=True):
+            D, g = recording_design(rec, w, p)
+            obs = _observed_per_metre(rec, mode, w)
+            a0 = jnp.hypot(p["c"][2], p["c"][2 + nm]) / (jnp.abs(rec.scale) * obs)
+            a, phi = slow_flow(mode, rec.t, a0)
+            env = a / jnp.maximum(a0, 1e-300)
+            if rec.observable == "acceleration":
+                env = env * (mode.omega(a) / mode.omega(a0)) ** 2
+            c, s = env * jnp.cos(phi), env * jnp.sin(phi)
+            if rec.avg_offsets is not None:
+                wd = mode.omega(a) * jnp.sqrt(1 - mode.zeta0**2)
+                re, im = conversion_average(mode.zeta0 * mode.omega0 + 0 * wd, wd, rec.avg_offsets)
+                c, s = c * re - s * im, s * re + c * im
+            D = D.at[:, 2].set(c).at[:, 2 + nm].set(s)
+            if "coulomb" in self.terms and rec.observable != "acceleration":
+                g = g + _friction_offset(rec, p["c"][2], p["c"][2 + nm], phi, a, mode, obs)
+            out.append((D, g, a))
+        return out
+
+    def residuals(self, params) -> Array:
+        """Weighted residuals of all recordings, one vector."""
+        return jnp.concatenate(
+            [
+                (D @ p["c"] + g - r.y) * r.weight
+                for (D, g, _), r, p in zip(
+                    self.design(params), self.base.recordings, params["recs"], strict=True
+                )
+            ]
+        )
+
+    def reported(self, params, amplitudes: Array) -> dict[str, Array]:
+        """The linear fit's quantities (f1_hz, ζ … at ``a → 0``), the physical nonlinear
+        coefficients, and the backbone ``f(a)``, ``ζ(a)`` at ``amplitudes`` (m)."""
+        out = dict(self.base.reported(params))
+        m = self.mode(params)
+        names = {"cubic": "gamma_per_m2", "quadratic": "quadratic_per_m"}
+        names["coulomb"] = "coulomb_m_s2"
+        for term in self.terms:
+            out[names[term]] = getattr(m, names[term])
+        for i in range(amplitudes.shape[0]):
+            out[f"backbone_f_{i}"] = m.frequency_hz(amplitudes[i])
+            out[f"backbone_zeta_{i}"] = m.zeta(amplitudes[i])
+        return out
+
+
+def _friction_offset(rec, c_cos, c_sin, phi, a, mode, per_m):
+    """Dry friction's square wave in normalised observed units.
+
+    Each half-cycle oscillates about ``±F/ω₀²`` (the side the motion comes from), so the
+    deflection is ``a cos ψ + (F/ω₀²) sgn(sin ψ)`` with ``ψ`` the fitted mode-1 phase: a
+    component in quadrature (``4F/(πω₀²) sin ψ``) whose share grows as ``a`` falls, which the
+    averaged ``a cos φ`` alone would take for a drifting frequency. Its first two harmonics
+    are kept (the 5th is 1/5 of the 1st's 4F/(πω₀²)); an accelerometer does not see it
+    (``ü = −ω₀²(u ∓ F/ω₀²)``).
+    """
+    psi = phi - jnp.arctan2(c_sin, c_cos)
+    square = 4 / jnp.pi * (jnp.sin(psi) + jnp.sin(3 * psi) / 3)
+    # once friction holds the whisker it stays off-centre, on the side it last came from
+    last = jnp.maximum(jnp.sum(a > 0) - 1, 0)
+    square = jnp.where(a > 0, square, jnp.sign(jnp.sin(psi[last])))
+    offset = mode.coulomb_m_s2 / mode.omega0**2  # m at the tip
+    return jnp.abs(rec.scale) * per_m * offset * square
+
+
+def _observed_per_metre(rec, mode, whisker):
+    """Observed (physical) amplitude per metre of mode-1 tip deflection: the mode shape's
+    ``φ₁(x)/φ₁(l)`` where it is read, times ``ω₀²`` for acceleration."""
+    acc = mode.omega0**2 if rec.observable == "acceleration" else 1.0
+    return acc / tip_per_sensor(whisker, rec.x_m)
+
+
+def tip_per_sensor(whisker, x_m):
+    """``φ₁(l)/φ₁(x)``: mode 1's tip deflection per unit of its deflection at ``x_m``."""
+    shape = mode_shape(whisker.beta, jnp.stack([x_m / whisker.length_m, 1.0]))[:, 0]
+    return shape[1] / shape[0]
+
+
+def _flat_residuals(flat, problem):
+    return problem.residuals(problem.unflatten(flat))
+
+
+@eqx.filter_jit
+def _solve(problem, flat0, solver, max_steps):
+    return _lsq.least_squares(
+        _flat_residuals, flat0, problem, solver=_lsq.make_solver(solver), max_steps=max_steps
+    )
+
+
+@eqx.filter_jit
+def _residuals_and_jacobian(problem, flat):
+    return _flat_residuals(flat, problem), jax.jacfwd(_flat_residuals)(flat, problem)
+
+
+@eqx.filter_jit
+def _reported_with_jacobian(problem, flat, amplitudes):
+    def fn(f):
+        return jnp.stack(list(problem.reported(problem.unflatten(f), amplitudes).values()))
+
+    return fn(flat), jax.jacfwd(fn)(flat)
+
+
+@eqx.filter_jit
+def _reweighted(problem, params):
+    weights = []
+    for (D, g, _), r, p in zip(
+        problem.design(params), problem.base.recordings, params["recs"], strict=True
+    ):
+        res = D @ p["c"] + g - r.y
+        sigma = jnp.sqrt(jnp.sum(res**2) / max(res.size - D.shape[1], 1))
+        weights.append(1.0 / jnp.maximum(sigma, 1e-12))
+    return eqx.tree_at(lambda q: [r.weight for r in q.base.recordings], problem, weights)
+
+
+# --------------------------------------------------------------------------- results
+@dataclass
+class NonlinearCalibration(Calibration):
+    """A :class:`Calibration` of the nonlinear model (``model = "nonlinear"``).
+
+    ``params["f1_hz"]`` and ``params["zeta"]`` are the small-amplitude (``a → 0``) values;
+    the nonlinear coefficients are ``gamma_per_m2`` (γ), ``quadratic_per_m`` (c) and
+    ``coulomb_m_s2`` (F), as fitted.
+
+    Attributes:
+        backbone: ``amplitude_m``, ``f_hz``, ``f_std``, ``zeta``, ``zeta_std``: the fitted
+            backbone at amplitudes spanning the recordings' (lists), and ``windows``: short-
+            window damped-sine fits (``amplitude_m``, ``f_hz``, ``zeta``) to compare with it.
+        linear: The linear calibration the fit started from.
+    """
+
+    backbone: dict = field(default_factory=dict)
+    linear: Calibration | None = field(default=None, repr=False)
+
+    def to_json(self) -> dict:
+        """The linear fit's JSON summary plus ``model`` and ``backbone``."""
+        out = super().to_json()
+        out["model"] = "nonlinear"
+        out["backbone"] = self.backbone
+        return out
+
+    def report(self) -> str:
+        """The console report with the backbone's table at the end."""
+        b = self.backbone
+        lines = [super().report(), "[[Backbone]] (a: mode 1 tip amplitude)"]
+        for i, a in enumerate(b["amplitude_m"]):
+            lines.append(
+                f"    a = {a:.4g} m: f = {b['f_hz'][i]:.6g} ± {b['f_std'][i]:.2g} Hz, "
+                f"zeta = {b['zeta'][i]:.4g} ± {b['zeta_std'][i]:.2g}"
+            )
+        return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------- calibrate
+def calibrate_nonlinear(
+    linear: Calibration,
+    observations,
+    *,
+    terms: tuple[str, ...] = NL_TERMS,
+    solver: str = "levenberg-marquardt",
+    max_steps: int = 400,
+) -> NonlinearCalibration:
+    """Fit the nonlinear model, starting from a converged linear calibration.
+
+    Args:
+        linear: The linear :class:`Calibration` of the same record and recordings.
+        observations: The recordings (free decays only).
+        terms: Nonlinear terms to fit (a subset of :data:`NL_TERMS`).
+        solver: As :func:`whiskerid.fit.calibrate`.
+        max_steps: Solver step limit.
+
+    Returns:
+        A :class:`NonlinearCalibration`; never raises on a failed solve (see ``status``).
+    """
+    obs = list(observations)
+    base = linear.problem
+    if base is None or linear.optimum is None:
+        raise CalibrationError("the nonlinear fit needs a linear calibration to start from")
+    if base.static_test is not None or any(r.excitation != "decay" for r in base.recordings):
+        raise CalibrationError(
+            "the nonlinear model fits free decays only (no sine, base motion or static test); "
+            "fit those with --model linear"
+        )
+    terms = tuple(t for t in NL_TERMS if t in terms)
+    nm = base.n_modes
+    wl = base.whisker(linear.optimum)
+    w0 = float(wl.omega_rad_s[0])
+    mode_l = NonlinearMode(w0 / (2 * np.pi), float(wl.zeta[0]))
+    amps = [
+        float(np.hypot(p["c"][2], p["c"][2 + nm]))
+        / (abs(float(r.scale)) * float(_observed_per_metre(r, mode_l, wl)))
+        for r, p in zip(base.recordings, linear.optimum["recs"], strict=True)
+    ]
+    problem = NonlinearProblem(base=base, a_ref=jnp.asarray(max(amps)), terms=terms)
+    theta0 = dict(linear.optimum)
+    theta0["nl"] = jnp.zeros(len(terms))
+    res = _solve(problem, problem.flatten(theta0), solver, max_steps)
+    problem = _reweighted(problem, problem.unflatten(res.value))
+    res = _solve(problem, res.value, solver, max_steps)
+    resid_w, jac = (np.asarray(a) for a in _residuals_and_jacobian(problem, res.value))
+    bread = np.asarray(_lsq.scaled_inverse_gram(jac))
+    s2 = float(_lsq.residual_variance(resid_w, res.value.size))
+    cov_white = s2 * bread
+    gcos = float(_lsq.gradient_cosine_from(jac, resid_w))
+    converged = bool(res.ok) or gcos < GTOL
+    ok = converged and bool(np.all(np.isfinite(np.diag(cov_white))))
+    status = "ok" if ok else ("non-finite" if not np.isfinite(float(res.cost)) else "not converged")
+    cov, lag = hac_covariance(_blocks(jac, resid_w, obs), bread)
+    cov = no_smaller_than(cov, cov_white)
+    uncertainty = (
+        f"HAC (Newey-West, Bartlett weights to lag {lag}; never below the white-noise 1-sigma)"
+    )
+    optimum = problem.unflatten(res.value)
+    per_rec, curves, envelopes = _per_recording(problem, optimum, obs)
+    grid = _amplitude_grid(envelopes, per_rec)
+    params, corr, backbone = _report(problem, res.value, cov, cov_white, grid, linear)
+    backbone["windows"] = short_window_points(obs, per_rec, float(params["f1_hz"]["value"]))
+    diagnostics = {
+        "model": "nonlinear",
+        "rms_residual": [r["rms_residual"] for r in per_rec],
+        "reduced_chi2": s2,
+        "gradient_cosine": gcos,
+        "n_samples": int(sum(o.t.size for o in obs)),
+        "n_params": int(res.value.size),
+        "steps": int(res.steps),
+        "lag1_autocorr": [r["lag1_autocorr"] for r in per_rec],
+        "weighted_rms": float(np.sqrt(np.mean(resid_w**2))),
+        "uncertainty": uncertainty,
+        "a_ref_m": float(problem.a_ref),
+        # RSS of the linear fit over the nonlinear one (normalised data, unweighted)
+        "linear_rss_over_nonlinear": _rss_linear(linear)
+        / max(_rss_nonlinear(problem, optimum), 1e-300),
+    }
+    warnings = _poor_fit_warnings(per_rec)
+    checks: dict[str, str] = {}
+    if ok:
+        f1_nom = float(linear.record.whisker().natural_frequencies_hz[0])
+        checks = check_fit(params, per_rec, f1_nom, decay_rates_hz=decay_rates(obs))
+        # residuals at the whisker's frequency after the nonlinear model: a lag-1 test
+        # does not see them, the HAC 1σ does allow for them
+        checks.pop("correlated-residuals", None)
+        z = np.asarray(backbone["zeta"])
+        if np.any(z < -2 * np.asarray(backbone["zeta_std"])):
+            checks["negative-damping"] = (
+                f"zeta(a) falls to {z.min():.3g} within the recorded amplitudes: the damping "
+                "terms fitted do not describe these data; fit fewer terms (--nl-terms)"
+            )
+    if ok and warnings:
+        status = "poor fit"
+    elif ok and checks:
+        status = "check"
+    warnings += [f"{name}: {text}" for name, text in checks.items()]
+    out = NonlinearCalibration(
+        status=status, ok=ok, params=params, correlations=corr, fixed=dict(linear.fixed),
+        note=_note(linear.note, terms), diagnostics=diagnostics, per_recording=per_rec,
+        record=linear.record, solver=solver, curves=curves, warnings=warnings, checks=checks,
+        problem=problem, optimum=optimum, covariance=cov, backbone=backbone, linear=linear,
+    )  # fmt: skip
+    out.record = _updated_record(out)
+    return out
+
+
+def _rss_linear(cal: Calibration) -> float:
+    """Unweighted normalised RSS of the linear fit (comparable with the nonlinear one)."""
+    return float(sum(np.sum(((np.asarray(m) - y) / np.std(y)) ** 2) for _, y, m in cal.curves))
+
+
+def _rss_nonlinear(problem, params) -> float:
+    out = 0.0
+    for (D, g, _), r, p in zip(
+        problem.design(params), problem.base.recordings, params["recs"], strict=True
+    ):
+        out += float(jnp.sum((D @ p["c"] + g - r.y) ** 2))
+    return out
+
+
+def _note(linear_note: str, terms) -> str:
+    return (
+        f"{linear_note} Nonlinear terms fitted: {', '.join(terms)}. f1 and zeta are the "
+        "small-amplitude (a -> 0) values; the backbone f(a), zeta(a) is identified only "
+        "between the smallest and largest amplitudes recorded, and the amplitude a (mode 1 "
+        "tip deflection, m) rests on the record's gain and mode shape."
+    )
+
+
+def _per_recording(problem: NonlinearProblem, optimum, obs):
+    designs = problem.design(optimum)
+    out, curves, envelopes = [], [], []
+    nm = problem.base.n_modes
+    for (D, g, a), rec, p, o in zip(designs, problem.base.recordings, optimum["recs"], obs,
+                                    strict=True):  # fmt: skip
+        y_mean, y_std = float(np.mean(o.y)), float(np.std(o.y))
+        model = np.asarray(D @ p["c"] + g) * y_std + y_mean
+        r = o.y - model
+        rms = float(np.sqrt(np.mean(r**2)))
+        w = problem.base.whisker(optimum)
+        obs_per_m = float(_observed_per_metre(rec, problem.mode(optimum), w))
+        c = np.asarray(p["c"])
+        modal = np.asarray(D)[:, 2 : 2 + 2 * nm] * c[2 : 2 + 2 * nm]
+        modal = modal[:, :nm] + modal[:, nm:]
+        out.append(
+            {
+                "name": o.name,
+                "source": o.source,
+                "excitation": o.excitation,
+                "observable": o.observable,
+                "n_samples": int(o.t.size),
+                "t_start_s": float(o.t[0]),
+                "rms_residual": rms,
+                "rms_signal": y_std,
+                "snr_db": float(20 * np.log10(y_std / max(rms, 1e-300))),
+                "lag1_autocorr": lag1_autocorr(r),
+                "residual_peak": residual_peak(o.t, r),
+                "selection": o.selection,
+                "offset": float(c[0] * y_std + y_mean),
+                "modal_rms": [float(v) for v in np.sqrt(np.mean(modal**2, axis=0)) * y_std],
+                "amplitude_start_m": float(a[0]),
+                "amplitude_end_m": float(a[-1]),
+                # the residual RMS as a mode-1 amplitude (m): below it the data say little
+                "noise_amplitude_m": rms * np.sqrt(2) / (abs(float(rec.scale)) * y_std * obs_per_m),
+            }
+        )
+        curves.append((o.t, o.y, model))
+        envelopes.append(np.asarray(a))
+    return out, curves, envelopes
+
+
+def _amplitude_grid(envelopes, per_rec) -> np.ndarray:
+    """Amplitudes (m) where the recordings inform the backbone: from the largest start
+    down to the smallest envelope still three times above its recording's noise."""
+    hi = max(float(e[0]) for e in envelopes)
+    lows = [max(float(e[-1]), 3 * r["noise_amplitude_m"]) for e, r in zip(envelopes, per_rec,
+                                                                        strict=True)]  # fmt: skip
+    lo = min(min(lows), 0.5 * hi)
+    return np.geomspace(lo, hi, BACKBONE_POINTS)
+
+
+def _report(problem, flat, cov, cov_white, grid, linear):
+    values, jac = (np.asarray(a) for a in _reported_with_jacobian(problem, flat, jnp.asarray(grid)))
+    names = list(problem.reported(problem.unflatten(flat), jnp.asarray(grid)))
+    dcov = jac @ cov @ jac.T
+    std = np.sqrt(np.maximum(np.diag(dcov), 0.0))
+    std_white = np.sqrt(np.maximum(np.diag(jac @ cov_white @ jac.T), 0.0))
+    params, bb = {}, {"f_hz": [], "f_std": [], "zeta": [], "zeta_std": []}
+    keep = []
+    for i, name in enumerate(names):
+        if name.startswith("backbone_"):
+            key = "f" if name.startswith("backbone_f_") else "zeta"
+            bb[f"{key}_hz" if key == "f" else key].append(float(values[i]))
+            bb[f"{key}_std"].append(float(std[i]))
+            continue
+        keep.append(i)
+        source = linear.params[name]["source"] if name in linear.params else "fit"
+        params[name] = {"value": float(values[i]), "std": float(std[i]), "source": source,
+                        "std_white": float(std_white[i])}  # fmt: skip
+    bb["amplitude_m"] = [float(a) for a in grid]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sub = dcov[np.ix_(keep, keep)]
+        corr = sub / np.outer(std[keep], std[keep])
+    correlations = {
+        "names": [names[i] for i in keep],
+        "matrix": np.round(np.nan_to_num(corr), 6).tolist(),
+    }
+    return params, correlations, bb
+
+
+def _updated_record(cal: NonlinearCalibration):
+    """The linear fit's record with the a→0 values and a ``[fit.nonlinear]`` table."""
+    rec = cal.linear.record
+    extra = dict(rec.extra)
+    fit = dict(extra.get("fit", {}))
+    p = cal.params
+    fit["status"] = cal.status
+    fit["model"] = "nonlinear"
+    fit.pop("warnings", None)  # the linear fit's
+    if cal.warnings:
+        fit["warnings"] = list(cal.warnings)
+    fit["params"] = {k: {"value": v["value"], "std": v["std"], "source": v["source"]}
+                     for k, v in p.items()}  # fmt: skip
+    fit["nonlinear"] = {
+        "f0_hz": p["f1_hz"]["value"],
+        "zeta0": p["zeta"]["value"],
+        "gamma_per_m2": p.get("gamma_per_m2", {"value": 0.0})["value"],
+        "quadratic_per_m": p.get("quadratic_per_m", {"value": 0.0})["value"],
+        "coulomb_m_s2": p.get("coulomb_m_s2", {"value": 0.0})["value"],
+        "amplitude": "mode 1 tip deflection (m)",
+        "backbone": {k: v for k, v in cal.backbone.items() if k != "windows"},
+    }
+    extra["fit"] = fit
+    return rec.replace(zeta=p["zeta"]["value"], extra=extra)
