@@ -454,17 +454,8 @@ def calibrate_added_mass(
     )
     note = added_mass_note(problem, record, masses_text)
     fixed = {"length_m": float(record.structure.length_m), "tip_mass_kg": float(record.tip_mass_kg)}
-    diagnostics = {
-        "rms_residual": [r["rms_residual"] for r in per_rec],
-        "reduced_chi2": s2,
-        "gradient_cosine": gcos,
-        "n_samples": int(sum(o.t.size for o in obs)),
-        "n_params": int(res.value.size),
-        "steps": int(res.steps),
-        "lag1_autocorr": [r["lag1_autocorr"] for r in per_rec],
-        "weighted_rms": float(np.sqrt(np.mean(resid**2))),
-        "uncertainty": uncertainty,
-    }
+    diagnostics = cal_mod.fit_diagnostics(per_rec, obs, res, resid, s2=s2, gcos=gcos,
+                                          uncertainty=uncertainty)  # fmt: skip
     warnings = cal_mod._poor_fit_warnings(per_rec)
     checks = {}
     if ok:

@@ -21,9 +21,10 @@ residuals that one Gauss–Newton step along ``[J, Z]`` leaves, so that a misfit
 alternative explains does not widen its own yardstick), so that correlated noise does not
 fake a detection, and ``T = SᵀV⁻¹S`` is χ² with as many degrees of
 freedom as columns under a linear whisker. A statistic beyond its χ² quantile at
-:data:`P_FALSE` marks the linear fit ``check``; a Gauss–Newton step along ``[J, Z]`` estimates
-what the data found (``ζ`` and ``f`` at the largest and smallest amplitudes, or early and
-late), and the message says it.
+:data:`P_FALSE`, with a change of at least :data:`MIN_REL_CHANGE_ZETA` in ζ or
+:data:`MIN_REL_CHANGE_F` in f, marks the linear fit ``check``; a Gauss–Newton step along
+``[J, Z]`` estimates what the data found (``ζ`` and ``f`` at the largest and smallest
+amplitudes, or early and late), and the message says it.
 """
 
 import numpy as np
@@ -39,6 +40,14 @@ P_FALSE = 1e-4
 #: Columns of each test.
 NONLINEAR = ("cubic", "quadratic", "coulomb")
 SPLIT = ("zeta-late", "f-late")
+#: The early part of the early-against-late test spans at least this many periods of f1.
+MIN_CYCLES_BEFORE_SPLIT = 3
+#: A rejection also needs a change this large over the recording's amplitudes (or between
+#: its early and late parts): relative, of ζ or of f. Smaller ones are left to the linear
+#: fit, whose values average over them (half the nonlinear fit's own targets: 10 % in ζ0,
+#: 0.15 % in f0, so that the linear values stay within what a nonlinear fit could resolve).
+MIN_REL_CHANGE_ZETA = 0.05
+MIN_REL_CHANGE_F = 1e-3
 
 
 def applies(cal) -> bool:
@@ -73,9 +82,19 @@ def amplitude_test(cal) -> dict:
         out[name] = _score(jac, r, r_alt, z, [c["n"] for c in cols])
         out[name]["step"] = step[-z.shape[1] :].tolist()
         out[name]["linear_step"] = problem.unflatten(step[: jac.shape[1]])
-    nl, sp = out["nonlinear"], out["split"]
-    out["rejects"] = bool(nl["p_value"] < P_FALSE or sp["p_value"] < P_FALSE)
-    out["message"] = _message(cal, problem, opt, out, info) if out["rejects"] else ""
+    found = {k: _found(cal, opt, out, info, k) for k in ("nonlinear", "split")}
+    for k, (zetas, freqs, _) in found.items():
+        out[k]["rel_change_zeta"] = abs(zetas[1] - zetas[0]) / max(abs(zetas[0]), 1e-12)
+        out[k]["rel_change_f"] = abs(freqs[1] - freqs[0]) / max(abs(freqs[0]), 1e-12)
+    # Significant and large enough to matter: on clean recordings (ADC rounding the only
+    # noise) the test also finds misfits of the release and of the modes left out, a few
+    # per mille of ζ and tens of ppm of f, which the linear fit's values survive.
+    rejecting = [k for k in ("nonlinear", "split") if out[k]["p_value"] < P_FALSE
+                 and (out[k]["rel_change_zeta"] >= MIN_REL_CHANGE_ZETA
+                      or out[k]["rel_change_f"] >= MIN_REL_CHANGE_F)]  # fmt: skip
+    out["rejects"] = bool(rejecting)
+    best = min(rejecting, key=lambda k: out[k]["p_value"]) if rejecting else None
+    out["message"] = found[best][2] if best else ""
     for k in ("nonlinear", "split"):
         out[k].pop("linear_step")
     return out
@@ -116,6 +135,10 @@ def _columns(problem, opt):
             coul = coul - 2 * q / (x0 * e)
         energy = np.cumsum(m1**2)
         t_half = t[int(np.searchsorted(energy, 0.5 * energy[-1]))]
+        # A damping or frequency "before" the split needs cycles to be one: over the first
+        # cycle or two after a release the modes left out of the fit and the release itself
+        # still show, and a linear whisker would be called amplitude-dependent for them.
+        t_half = max(float(t_half), float(t[0]) + MIN_CYCLES_BEFORE_SPLIT * 2 * np.pi / w0)
         late = np.maximum(t - t_half, 0.0)
         cols = {
             "cubic": cubic, "quadratic": quad, "coulomb": coul,
@@ -173,15 +196,17 @@ def _gauss_newton(jac, r, z):
     return step / scale
 
 
-def _message(cal, problem, opt, out, info) -> str:
-    """What the data found, in the units of the report."""
-    nl, sp = out["nonlinear"], out["split"]
+def _found(cal, opt, out, info, test: str):
+    """What test ``test`` found, in the units of the report: ``((ζ before, ζ after),
+    (f before, f after), message)``, before/after being the largest and smallest amplitude
+    (``nonlinear``) or the early and late part of the decay (``split``)."""
     f1 = float(cal.params["f1_hz"]["value"])
-    if nl["p_value"] <= sp["p_value"]:
-        lin = nl["linear_step"]
-        zeta0 = float(to_interval(opt["zeta_u"] + lin["zeta_u"], 0.0, ZETA_MAX).ravel()[0])
-        f0 = f1 * float(np.exp(0.5 * np.ravel(lin["log_kappa"])[0]))
-        g, zv, zc = nl["step"]
+    res = out[test]
+    lin = res["linear_step"]
+    zeta0 = float(to_interval(opt["zeta_u"] + lin["zeta_u"], 0.0, ZETA_MAX).ravel()[0])
+    f0 = f1 * float(np.exp(0.5 * np.ravel(lin["log_kappa"])[0]))
+    if test == "nonlinear":
+        g, zv, zc = res["step"]
         a_ref = info["a_ref"]
         lo = max(min(max(c["a_end"], 3 * c["noise_m"]) for c in info["cols"]), a_ref / 30)
         parts = []
@@ -192,19 +217,26 @@ def _message(cal, problem, opt, out, info) -> str:
         verb = "falls" if z2 < z1 else "rises"
         fverb = "falls" if f_2 < f_1 else "rises"
         return (
-            f"the decay is not linear (score test p = {nl['p_value']:.2g}): zeta {z1:.3g} at "
-            f"{_mm(a1)} {verb} to {z2:.3g} at {_mm(a2)}, f1 {f_1:.5g} Hz {fverb} to {f_2:.5g} Hz: "
-            "amplitude-dependent damping and stiffness; fit with --model nonlinear"
+            (z1, z2),
+            (f_1, f_2),
+            (
+                f"the decay is not linear (score test p = {res['p_value']:.2g}): zeta {z1:.3g} "
+                f"at {_mm(a1)} {verb} to {z2:.3g} at {_mm(a2)}, f1 {f_1:.5g} Hz {fverb} to "
+                f"{f_2:.5g} Hz: amplitude-dependent damping and stiffness; "
+                "fit with --model nonlinear"
+            ),
         )
-    lin = sp["linear_step"]
-    zeta_e = float(to_interval(opt["zeta_u"] + lin["zeta_u"], 0.0, ZETA_MAX).ravel()[0])
-    f_e = f1 * float(np.exp(0.5 * np.ravel(lin["log_kappa"])[0]))
-    dz, df = sp["step"]
+    dz, df = res["step"]
     t_half = min(c["t_half"] for c in info["cols"])
     return (
-        f"early and late parts of the decay disagree (score test p = {sp['p_value']:.2g}): zeta "
-        f"{zeta_e:.3g} and f1 {f_e:.5g} Hz before {t_half:.3g} s, zeta {zeta_e + dz:.3g} and f1 "
-        f"{f_e * (1 + df):.5g} Hz after; fit with --model nonlinear"
+        (zeta0, zeta0 + dz),
+        (f0, f0 * (1 + df)),
+        (
+            "early and late parts of the decay disagree (score test p = "
+            f"{res['p_value']:.2g}): zeta {zeta0:.3g} and f1 {f0:.5g} Hz before "
+            f"{t_half:.3g} s, zeta {zeta0 + dz:.3g} and f1 "
+            f"{f0 * (1 + df):.5g} Hz after; fit with --model nonlinear"
+        ),
     )
 
 

@@ -273,17 +273,8 @@ def calibrate(
         white, *_ = _report(record, problem, res.reported, cov_white, static, nominal, tol)
         for k in params:
             params[k]["std_white"] = white[k]["std"]
-    diagnostics = {
-        "rms_residual": [r["rms_residual"] for r in per_rec],
-        "reduced_chi2": s2,
-        "gradient_cosine": gcos,
-        "n_samples": int(sum(o.t.size for o in obs)),
-        "n_params": int(res.value.size),
-        "steps": int(res.steps),
-        "lag1_autocorr": [r["lag1_autocorr"] for r in per_rec],
-        "weighted_rms": float(np.sqrt(np.mean(resid**2))),
-        "uncertainty": uncertainty,
-    }
+    diagnostics = fit_diagnostics(per_rec, obs, res, resid, s2=s2, gcos=gcos,
+                                  uncertainty=uncertainty)  # fmt: skip
     warnings = _poor_fit_warnings(per_rec)
     checks = {}
     if ok:
@@ -316,6 +307,23 @@ def calibrate(
     from ._amplitude import finish  # amplitude dependence and the choice of model
 
     return finish(out, obs, model, nl_terms)
+
+
+def fit_diagnostics(per_rec, obs, res, resid, *, s2, gcos, uncertainty) -> dict:
+    """The ``diagnostics`` of a calibration: residual sizes and correlation per recording,
+    the solver's figures (``res``: its ``value`` and ``steps``) and which covariance the 1σ
+    come from (shared by the linear, added-mass and nonlinear fits)."""
+    return {
+        "rms_residual": [r["rms_residual"] for r in per_rec],
+        "reduced_chi2": s2,
+        "gradient_cosine": gcos,
+        "n_samples": int(sum(o.t.size for o in obs)),
+        "n_params": int(res.value.size),
+        "steps": int(res.steps),
+        "lag1_autocorr": [r["lag1_autocorr"] for r in per_rec],
+        "weighted_rms": float(np.sqrt(np.mean(resid**2))),
+        "uncertainty": uncertainty,
+    }
 
 
 def _blocks(jac, resid, obs, correlated=True):
@@ -465,6 +473,27 @@ def _per_recording(problem: FitProblem, optimum, obs, models, resid):
     return out, curves, np.asarray(resid)
 
 
+def _plausible_structure(record, structure, cal: Calibration):
+    """``structure`` if a record can hold it; else the record's own, and ``cal`` marked
+    ``check`` (a fit far from the record, on an alias or from a wrong record, can imply a
+    modulus no material has: the calibration says so instead of failing to write it)."""
+    from ..model import RecordError
+
+    try:
+        record.replace(structure=structure)
+    except RecordError as err:
+        text = (
+            f"the fitted EI implies {err}; the record's structure is kept: check the record "
+            "and the recording (an alias of f1?)"
+        )
+        cal.checks["implausible-structure"] = text
+        cal.warnings.append(f"implausible-structure: {text}")
+        if cal.status == "ok":
+            cal.status = "check"
+        return record.structure
+    return structure
+
+
 def _updated_record(record, cal: Calibration, pin, static, obs, problem):
     from dataclasses import replace
 
@@ -483,6 +512,7 @@ def _updated_record(record, cal: Calibration, pin, static, obs, problem):
             structure = replace(structure, youngs_modulus_pa=ei / structure.second_moment_m4)
         else:
             structure = replace(structure, shear_modulus_pa=ei / structure.polar_moment_m4)
+        structure = _plausible_structure(record, structure, cal)
     files = []
     for o in obs:
         if o.source and Path(o.source).exists():

@@ -33,7 +33,7 @@ from jaxtyping import Array
 
 from ..model import NonlinearMode, mode_shape, slow_flow
 from . import _lsq as _lsq
-from ._calibrate import GTOL, Calibration, _blocks, _poor_fit_warnings
+from ._calibrate import GTOL, Calibration, _blocks, _poor_fit_warnings, fit_diagnostics
 from ._checks import check_fit, decay_rates, hac_covariance, no_smaller_than, residual_peak
 from ._checks import lag1 as lag1_autocorr
 from ._decay import conversion_average
@@ -326,15 +326,7 @@ def calibrate_nonlinear(
     backbone["windows"] = short_window_points(obs, per_rec, float(params["f1_hz"]["value"]))
     diagnostics = {
         "model": "nonlinear",
-        "rms_residual": [r["rms_residual"] for r in per_rec],
-        "reduced_chi2": s2,
-        "gradient_cosine": gcos,
-        "n_samples": int(sum(o.t.size for o in obs)),
-        "n_params": int(res.value.size),
-        "steps": int(res.steps),
-        "lag1_autocorr": [r["lag1_autocorr"] for r in per_rec],
-        "weighted_rms": float(np.sqrt(np.mean(resid_w**2))),
-        "uncertainty": uncertainty,
+        **fit_diagnostics(per_rec, obs, res, resid_w, s2=s2, gcos=gcos, uncertainty=uncertainty),
         "a_ref_m": float(problem.a_ref),
         # RSS of the linear fit over the nonlinear one (normalised data, unweighted)
         "linear_rss_over_nonlinear": _rss_linear(linear)
