@@ -397,7 +397,7 @@ def calibrate_added_mass(
         fitted, and per loaded configuration its f_1, ζ, mass and μ.
     """
     from . import _calibrate as cal_mod
-    from ._checks import LAG1_MAX, check_fit, decay_rates, robust_covariance
+    from ._checks import LAG1_MAX, check_fit, decay_rates, hac_covariance, no_smaller_than
     from ._lsq import gradient_cosine_from, residual_variance, scaled_inverse_gram
     from ._problem import reported_names, reported_with_jacobian, residuals_and_jacobian
 
@@ -426,13 +426,14 @@ def calibrate_added_mass(
     for r, k in zip(per_rec, problem.config_of, strict=True):
         r["added_mass_kg"] = float(problem.added_kg[k])
         r["configuration"] = int(k)
-    uncertainty = "white noise: s^2 (J^T J)^-1"
-    if ok:  # a sandwich where the residuals are correlated or their spread changes
-        correlated = max(r["lag1_autocorr"] for r in per_rec) > LAG1_MAX
-        cov, uncertainty = robust_covariance(
-            cal_mod._blocks(jac, resid_w, obs, correlated), bread, cov
+    uncertainty = "white noise: s^2 (J^T J)^-1, masses' 1-sigma included"
+    if ok and max(r["lag1_autocorr"] for r in per_rec) > LAG1_MAX:
+        hac, lag = hac_covariance(cal_mod._blocks(jac, resid_w, obs), bread)
+        cov = no_smaller_than(hac, cov)
+        uncertainty = (
+            f"HAC (Newey-West, Bartlett weights to lag {lag}; never below the white-noise "
+            "1-sigma), masses' 1-sigma included: the residuals are correlated"
         )
-    uncertainty += ", masses' 1-sigma included"
     names = reported_names(problem)
     values, rjac = (np.asarray(a) for a in reported_with_jacobian(problem, res.value))
     dcov = rjac @ cov @ rjac.T

@@ -31,6 +31,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from ._checks import hac_covariance
+from ._core import _padded as padded_problem
 from ._lsq import to_interval
 from ._nonlinear import tip_per_sensor
 from ._problem import ZETA_MAX, residuals_and_jacobian
@@ -61,8 +62,13 @@ def applies(cal) -> bool:
     )
 
 
-def amplitude_test(cal) -> dict:
+def amplitude_test(cal, *, resid=None, jac=None) -> dict:
     """Score tests of a linear calibration (see the module docstring).
+
+    Args:
+        cal: The linear calibration.
+        resid, jac: Its weighted residuals and their Jacobian at the optimum, as the
+            calibration's compiled program returned them (computed here when not given).
 
     Returns:
         ``{"nonlinear": {...}, "split": {...}, "rejects": bool, "message": str}``; each test
@@ -70,7 +76,9 @@ def amplitude_test(cal) -> dict:
     """
     problem, opt = cal.problem, cal.optimum
     flat = problem.flatten(opt)
-    r, jac = (np.asarray(a) for a in residuals_and_jacobian(problem, flat))
+    if resid is None or jac is None:
+        resid, jac = residuals_and_jacobian(problem, flat)
+    r, jac = np.asarray(resid), np.asarray(jac)
     cols, info = _columns(problem, opt)
     out = {}
     for name in ("nonlinear", "split"):
@@ -107,7 +115,13 @@ def _columns(problem, opt):
     w0 = float(w.omega_rad_s[0])
     z0 = float(w.zeta[0])
     sigma = z0 * w0
-    designs = problem.design(opt)
+    # the design on the recordings padded to their shape buckets, as the calibration's
+    # program pads them: one compiled design per bucket, not per recording length
+    padded, _ = padded_problem(problem)
+    designs = [
+        (np.asarray(D)[: r.t.size], np.asarray(g)[: r.t.size])
+        for (D, g), r in zip(padded.design(opt), problem.recordings, strict=True)
+    ]
     amps, per_ms = [], []
     for rec, p in zip(problem.recordings, opt["recs"], strict=True):
         per_m = (w0**2 if rec.observable == "acceleration" else 1.0) / float(
@@ -249,7 +263,7 @@ def _mm(a_m: float) -> str:
 MODELS = ("linear", "nonlinear", "auto")
 
 
-def finish(cal, observations, model: str, terms=None):
+def finish(cal, observations, model: str, terms=None, *, resid=None, jac=None):
     """The calibration ``model`` asks for, from the linear one ``cal``.
 
     ``linear``: ``cal``, marked ``check`` (``amplitude-dependent``) when the score tests
@@ -261,7 +275,7 @@ def finish(cal, observations, model: str, terms=None):
 
     test = None
     if applies(cal):
-        test = amplitude_test(cal)
+        test = amplitude_test(cal, resid=resid, jac=jac)
         cal.diagnostics["amplitude_test"] = {
             k: {kk: vv for kk, vv in v.items() if kk != "step"} if isinstance(v, dict) else v
             for k, v in test.items()

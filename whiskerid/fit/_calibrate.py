@@ -306,7 +306,7 @@ def calibrate(
     out.record = _updated_record(record, out, pin, static, obs, problem)
     from ._amplitude import finish  # amplitude dependence and the choice of model
 
-    return finish(out, obs, model, nl_terms)
+    return finish(out, obs, model, nl_terms, resid=resid_w, jac=jac)
 
 
 def fit_diagnostics(per_rec, obs, res, resid, *, s2, gcos, uncertainty) -> dict:
