@@ -466,11 +466,7 @@ def calibrate_added_mass(
         small = added_mass_check(params, problem, record)
         if small is not None:
             checks["added-mass-small"] = small
-    if ok and warnings:
-        status = "poor fit"
-    elif ok and checks:
-        status = "check"
-    warnings += [f"{name}: {text}" for name, text in checks.items()]
+    status, warnings = cal_mod.fit_status(status, ok, warnings, checks)
     out = cal_mod.Calibration(
         status=status,
         ok=ok,

@@ -280,11 +280,7 @@ def calibrate(
     if ok:
         checks = check_fit(params, per_rec, float(nominal.natural_frequencies_hz[0]),
                            decay_rates_hz=decay_rates(obs), f1_expected_hz=f1_start_hz)  # fmt: skip
-    if ok and warnings:
-        status = "poor fit"
-    elif ok and checks:
-        status = "check"
-    warnings += [f"{name}: {text}" for name, text in checks.items()]
+    status, warnings = fit_status(status, ok, warnings, checks)
     out = Calibration(
         status=status,
         ok=ok,
@@ -307,6 +303,17 @@ def calibrate(
     from ._amplitude import finish  # amplitude dependence and the choice of model
 
     return finish(out, obs, model, nl_terms, resid=resid_w, jac=jac)
+
+
+def fit_status(status: str, ok: bool, warnings: list[str], checks: dict[str, str]):
+    """The status a converged fit reports and its warnings: ``poor fit`` when a recording
+    fits poorly, else ``check`` when a check failed (each failed check is also a warning);
+    shared by the linear, added-mass and nonlinear fits."""
+    if ok and warnings:
+        status = "poor fit"
+    elif ok and checks:
+        status = "check"
+    return status, warnings + [f"{name}: {text}" for name, text in checks.items()]
 
 
 def fit_diagnostics(per_rec, obs, res, resid, *, s2, gcos, uncertainty) -> dict:

@@ -33,7 +33,14 @@ from jaxtyping import Array
 
 from ..model import NonlinearMode, mode_shape, slow_flow
 from . import _lsq as _lsq
-from ._calibrate import GTOL, Calibration, _blocks, _poor_fit_warnings, fit_diagnostics
+from ._calibrate import (
+    GTOL,
+    Calibration,
+    _blocks,
+    _poor_fit_warnings,
+    fit_diagnostics,
+    fit_status,
+)
 from ._checks import check_fit, decay_rates, hac_covariance, no_smaller_than, residual_peak
 from ._checks import lag1 as lag1_autocorr
 from ._decay import conversion_average
@@ -346,11 +353,7 @@ def calibrate_nonlinear(
                 f"zeta(a) falls to {z.min():.3g} within the recorded amplitudes: the damping "
                 "terms fitted do not describe these data; fit fewer terms (--nl-terms)"
             )
-    if ok and warnings:
-        status = "poor fit"
-    elif ok and checks:
-        status = "check"
-    warnings += [f"{name}: {text}" for name, text in checks.items()]
+    status, warnings = fit_status(status, ok, warnings, checks)
     out = NonlinearCalibration(
         status=status, ok=ok, params=params, correlations=corr, fixed=dict(linear.fixed),
         note=_note(linear.note, terms), diagnostics=diagnostics, per_recording=per_rec,

@@ -164,6 +164,15 @@ def plot_recording_labels(path: str | Path, t: np.ndarray, x: np.ndarray, result
     return _save(fig, path)
 
 
+def terrain_panels(plt, n: int):
+    """A figure of ``n`` panels sharing their frequency axis, four to a row (one per
+    terrain): the figure and its axes as a 2-D array."""
+    ncols = min(4, n)
+    nrows = -(-n // ncols)
+    return plt.subplots(nrows, ncols, figsize=(3.2 * ncols, 2.8 * nrows), sharey=True,
+                        constrained_layout=True, squeeze=False)  # fmt: skip
+
+
 def plot_dominant_frequencies(path: str | Path, analysis: dict) -> Path:
     """One panel per terrain: the dominant frequency components against the robot's speed
     (:func:`whiskerid.classify.analyze_dataset`): the dominant one of the mean spectrum
@@ -173,10 +182,7 @@ def plot_dominant_frequencies(path: str | Path, analysis: dict) -> Path:
     plt = _pyplot()
     groups = analysis["groups"]
     labels = list(groups)
-    ncols = min(4, len(labels))
-    nrows = -(-len(labels) // ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(3.2 * ncols, 2.8 * nrows), sharey=True,
-                             constrained_layout=True, squeeze=False)  # fmt: skip
+    fig, axes = terrain_panels(plt, len(labels))
     for ax, label in zip(axes.flat, labels, strict=False):
         for k, (speed, g) in enumerate(sorted(groups[label].items(), key=lambda kv: kv[0])):
             v = float(speed) if speed != "None" else float(k)

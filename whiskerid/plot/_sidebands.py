@@ -3,7 +3,7 @@ speed, one panel per terrain (:func:`whiskerid.classify.analyze_dataset`)."""
 
 from pathlib import Path
 
-from ._plot import _pyplot, _save
+from ._plot import _pyplot, _save, terrain_panels
 
 
 def plot_sidebands(path: str | Path, analysis: dict) -> Path:
@@ -14,10 +14,7 @@ def plot_sidebands(path: str | Path, analysis: dict) -> Path:
     plt = _pyplot()
     groups = analysis["groups"]
     labels = list(groups)
-    ncols = min(4, len(labels))
-    nrows = -(-len(labels) // ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(3.2 * ncols, 2.8 * nrows), sharey=True,
-                             constrained_layout=True, squeeze=False)  # fmt: skip
+    fig, axes = terrain_panels(plt, len(labels))
     seen: set[str] = set()
 
     def tag(name):
