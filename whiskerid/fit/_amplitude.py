@@ -28,11 +28,11 @@ amplitudes, or early and late), and the message says it.
 """
 
 import numpy as np
-from scipy.stats import chi2
 
 from ._checks import hac_covariance
+from ._chi2 import chi2_sf
 from ._core import _padded as padded_problem
-from ._lsq import to_interval
+from ._core import unflatten_numpy
 from ._nonlinear import tip_per_sensor
 from ._problem import ZETA_MAX, residuals_and_jacobian
 
@@ -62,24 +62,26 @@ def applies(cal) -> bool:
     )
 
 
-def amplitude_test(cal, *, resid=None, jac=None) -> dict:
+def amplitude_test(cal, *, resid=None, jac=None, core=None) -> dict:
     """Score tests of a linear calibration (see the module docstring).
 
     Args:
         cal: The linear calibration.
         resid, jac: Its weighted residuals and their Jacobian at the optimum, as the
             calibration's compiled program returned them (computed here when not given).
+        core: What that program computed of the whisker for this test
+            (``CoreResult.amplitude``; computed here when not given). With all three the
+            test runs in NumPy, nothing is traced or compiled.
 
     Returns:
         ``{"nonlinear": {...}, "split": {...}, "rejects": bool, "message": str}``; each test
         has its statistic ``T``, degrees of freedom, p-value, and the Gauss–Newton estimates.
     """
     problem, opt = cal.problem, cal.optimum
-    flat = problem.flatten(opt)
     if resid is None or jac is None:
-        resid, jac = residuals_and_jacobian(problem, flat)
+        resid, jac = residuals_and_jacobian(problem, problem.flatten(opt))
     r, jac = np.asarray(resid), np.asarray(jac)
-    cols, info = _columns(problem, opt)
+    cols, info = _columns(problem, opt, core if core is not None else _whisker_terms(problem, opt))
     out = {}
     for name in ("nonlinear", "split"):
         z = np.concatenate([c[name] for c in cols], axis=0)
@@ -89,7 +91,7 @@ def amplitude_test(cal, *, resid=None, jac=None) -> dict:
         r_alt = r + np.concatenate([jac, z], axis=1) @ step
         out[name] = _score(jac, r, r_alt, z, [c["n"] for c in cols])
         out[name]["step"] = step[-z.shape[1] :].tolist()
-        out[name]["linear_step"] = problem.unflatten(step[: jac.shape[1]])
+        out[name]["linear_step"] = unflatten_numpy(problem, step[: jac.shape[1]])
     found = {k: _found(cal, opt, out, info, k) for k in ("nonlinear", "split")}
     for k, (zetas, freqs, _) in found.items():
         out[k]["rel_change_zeta"] = abs(zetas[1] - zetas[0]) / max(abs(zetas[0]), 1e-12)
@@ -108,35 +110,45 @@ def amplitude_test(cal, *, resid=None, jac=None) -> dict:
     return out
 
 
-def _columns(problem, opt):
-    """Score columns per recording (weighted like the residuals) and the amplitudes."""
+def _whisker_terms(problem, opt) -> dict:
+    """What :func:`_columns` reads of the whisker at ``opt`` (as ``CoreResult.amplitude``),
+    computed with JAX here (a calibration's compiled program returns it)."""
     w = problem.whisker(opt)
     nm = problem.n_modes
-    w0 = float(w.omega_rad_s[0])
-    z0 = float(w.zeta[0])
-    sigma = z0 * w0
     # the design on the recordings padded to their shape buckets, as the calibration's
     # program pads them: one compiled design per bucket, not per recording length
     padded, _ = padded_problem(problem)
     designs = [
-        (np.asarray(D)[: r.t.size], np.asarray(g)[: r.t.size])
-        for (D, g), r in zip(padded.design(opt), problem.recordings, strict=True)
+        np.asarray(D)[: r.t.size]
+        for (D, _), r in zip(padded.design(opt), problem.recordings, strict=True)
     ]
+    return {
+        "w0": float(w.omega_rad_s[0]),
+        "zeta0": float(w.zeta[0]),
+        "tip": [float(tip_per_sensor(w, r.x_m)) for r in problem.recordings],
+        "mode1": [D[:, [2, 2 + nm]] for D in designs],
+        "dc": [D @ np.asarray(p["c"]) for D, p in zip(designs, opt["recs"], strict=True)],
+    }
+
+
+def _columns(problem, opt, terms):
+    """Score columns per recording (weighted like the residuals) and the amplitudes."""
+    nm = problem.n_modes
+    w0, z0 = terms["w0"], terms["zeta0"]
+    sigma = z0 * w0
     amps, per_ms = [], []
-    for rec, p in zip(problem.recordings, opt["recs"], strict=True):
-        per_m = (w0**2 if rec.observable == "acceleration" else 1.0) / float(
-            tip_per_sensor(w, rec.x_m)
-        )
+    for rec, p, tip in zip(problem.recordings, opt["recs"], terms["tip"], strict=True):
+        per_m = (w0**2 if rec.observable == "acceleration" else 1.0) / tip
         per_ms.append(per_m)
         amps.append(float(np.hypot(p["c"][2], p["c"][2 + nm])) / (abs(float(rec.scale)) * per_m))
     a_ref = max(amps)
     out = []
-    for (D, _), rec, p, a0, per_m in zip(designs, problem.recordings, opt["recs"], amps, per_ms,
-                                         strict=True):  # fmt: skip
-        D, c, t = np.asarray(D), np.asarray(p["c"]), np.asarray(rec.t)
+    for d1, dc, rec, p, a0, per_m in zip(terms["mode1"], terms["dc"], problem.recordings,
+                                         opt["recs"], amps, per_ms, strict=True):  # fmt: skip
+        d1, c, t = np.asarray(d1), np.asarray(p["c"]), np.asarray(rec.t)
         wgt = float(rec.weight)
-        m1 = D[:, 2] * c[2] + D[:, 2 + nm] * c[2 + nm]
-        q = D[:, 2] * c[2 + nm] - D[:, 2 + nm] * c[2]  # ∂m1/∂φ
+        m1 = d1[:, 0] * c[2] + d1[:, 1] * c[2 + nm]
+        q = d1[:, 0] * c[2 + nm] - d1[:, 1] * c[2]  # ∂m1/∂φ
         x0 = a0 / a_ref
         e = np.exp(-sigma * t)
         dphi_g = w0 * x0**2 * (1 - e**2) / (2 * sigma)
@@ -163,7 +175,7 @@ def _columns(problem, opt):
         z["n"] = t.size
         z["a_end"] = a0 * float(e[-1])
         z["t_half"] = float(t_half)
-        resid_rms = float(np.std(np.asarray(rec.y) - D @ c))
+        resid_rms = float(np.std(np.asarray(rec.y) - dc))
         z["noise_m"] = np.sqrt(2) * resid_rms / (abs(float(rec.scale)) * per_m)
         out.append(z)
     info = {"a_ref": a_ref, "w0": w0, "zeta0": z0, "cols": out}
@@ -197,7 +209,7 @@ def _score(jac, r, r_alt, z, sizes):
     s = zp.T @ r
     stat = float(s @ np.linalg.solve(v, s))
     k = z.shape[1]
-    return {"statistic": stat, "dof": k, "p_value": float(chi2.sf(stat, k)), "hac_lag": lag}
+    return {"statistic": stat, "dof": k, "p_value": chi2_sf(stat, k), "hac_lag": lag}
 
 
 def _gauss_newton(jac, r, z):
@@ -217,7 +229,8 @@ def _found(cal, opt, out, info, test: str):
     f1 = float(cal.params["f1_hz"]["value"])
     res = out[test]
     lin = res["linear_step"]
-    zeta0 = float(to_interval(opt["zeta_u"] + lin["zeta_u"], 0.0, ZETA_MAX).ravel()[0])
+    u = float(np.ravel(opt["zeta_u"] + lin["zeta_u"])[0])
+    zeta0 = ZETA_MAX / (1.0 + np.exp(-u))  # the problem's to_interval(u, 0, ZETA_MAX)
     f0 = f1 * float(np.exp(0.5 * np.ravel(lin["log_kappa"])[0]))
     if test == "nonlinear":
         g, zv, zc = res["step"]
@@ -263,7 +276,7 @@ def _mm(a_m: float) -> str:
 MODELS = ("linear", "nonlinear", "auto")
 
 
-def finish(cal, observations, model: str, terms=None, *, resid=None, jac=None):
+def finish(cal, observations, model: str, terms=None, *, resid=None, jac=None, core=None):
     """The calibration ``model`` asks for, from the linear one ``cal``.
 
     ``linear``: ``cal``, marked ``check`` (``amplitude-dependent``) when the score tests
@@ -275,7 +288,7 @@ def finish(cal, observations, model: str, terms=None, *, resid=None, jac=None):
 
     test = None
     if applies(cal):
-        test = amplitude_test(cal, resid=resid, jac=jac)
+        test = amplitude_test(cal, resid=resid, jac=jac, core=core)
         cal.diagnostics["amplitude_test"] = {
             k: {kk: vv for kk, vv in v.items() if kk != "step"} if isinstance(v, dict) else v
             for k, v in test.items()

@@ -302,7 +302,7 @@ def calibrate(
     out.record = _updated_record(record, out, pin, static, obs, problem)
     from ._amplitude import finish  # amplitude dependence and the choice of model
 
-    return finish(out, obs, model, nl_terms, resid=resid_w, jac=jac)
+    return finish(out, obs, model, nl_terms, resid=resid_w, jac=jac, core=res.amplitude)
 
 
 def fit_status(status: str, ok: bool, warnings: list[str], checks: dict[str, str]):

@@ -26,6 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..model import mode_shape
 from . import _lsq as _lsq
 from ._aot import cached_call
 from ._problem import FitProblem, recording_design
@@ -70,6 +71,11 @@ class CoreResult:
             ``(n, n_modes)``.
         reported: The reported quantities (:meth:`FitProblem.reported`) as a vector, and
             their Jacobian in the flat parameters.
+        amplitude: What the amplitude test (module ``_amplitude``) reads of the whisker at
+            the optimum: mode 1's ``w0`` (rad/s) and ``zeta0``, and per recording ``tip``
+            (mode 1's tip deflection per unit at the sensor), ``mode1`` (the design's two
+            mode-1 columns, ``(n, 2)``) and ``dc`` (the design times the linear
+            coefficients), so that the test runs in NumPy.
     """
 
     value: np.ndarray
@@ -85,6 +91,7 @@ class CoreResult:
     gcos: float
     models: list[tuple[np.ndarray, np.ndarray]]
     reported: tuple[np.ndarray, np.ndarray]
+    amplitude: dict
 
 
 def fit_problem(
@@ -136,6 +143,13 @@ def fit_problem(
         gcos=float(out["gcos"]),
         models=models,
         reported=(out["reported"], out["reported_jac"]),
+        amplitude={
+            "w0": float(out["w0"]),
+            "zeta0": float(out["zeta0"]),
+            "tip": [float(out[f"tip_{i}"]) for i in range(len(sizes))],
+            "mode1": [out[f"mode1_{i}"][:n] for i, n in enumerate(sizes)],
+            "dc": [out[f"dc_{i}"][:n] for i, n in enumerate(sizes)],
+        },
     )
 
 
@@ -271,6 +285,12 @@ def fit_core(problem: FitProblem, masks, first: dict, *, solver: str, max_steps:
         out[f"model_{i}"] = D @ p["c"] + g
         cols = D[:, 2 : 2 + 2 * nm] * p["c"][2 : 2 + 2 * nm]
         out[f"modal_{i}"] = cols[:, :nm] + cols[:, nm:]  # each mode's part of the signal
+        # for the amplitude test: mode 1's columns and its tip deflection per sensor unit
+        out[f"mode1_{i}"] = jnp.stack([D[:, 2], D[:, 2 + nm]], axis=1)
+        out[f"dc_{i}"] = D @ p["c"]
+        shape = mode_shape(w.beta, jnp.stack([r.x_m / w.length_m, 1.0]))[:, 0]
+        out[f"tip_{i}"] = shape[1] / shape[0]
+    out["w0"], out["zeta0"] = w.omega_rad_s[0], w.zeta[0]
 
     def reported(f):
         return jnp.stack(list(problem.reported(problem.unflatten(f)).values()))

@@ -43,6 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._lm import least_squares
 from ._signal import _interpolate
 
 #: Residual scales (robust RMS of the tail fit) within which a stretch is "still the decay".
@@ -318,18 +319,14 @@ def _predict(t, y, fit, at, t0, freqs, rates):
 def _fit_tail(t, y, f0, *, t0=None, start=None):
     """Frequencies and decay rates of one or two damped sinusoids fitted to ``(t, y)``
     (from ``start = (freqs, rates)`` when given, else from ``f0`` and the spectrum)."""
-    # Imported here: scipy.optimize takes longer to import than the rest of the fit
-    # package, and the stream and classifier import this package without detecting plucks.
-    from scipy.optimize import least_squares as _scipy_lsq
-
     t0 = t[0] if t0 is None else t0
     span = t[-1] - t[0]
     if start is not None:
         n = len(start[0])
         x0 = np.concatenate([np.asarray(start[0], float), np.asarray(start[1], float)])
-        fit = _scipy_lsq(lambda x: _linear_fit(t, y, t0, x[:n], np.abs(x[n:])), x0,
-                         method="lm", max_nfev=100 * x0.size)  # fmt: skip
-        return fit.x[:n], np.abs(fit.x[n:])
+        x, _ = least_squares(lambda x: _linear_fit(t, y, t0, x[:n], np.abs(x[n:])), x0,
+                             max_nfev=100 * x0.size)  # fmt: skip
+        return x[:n], np.abs(x[n:])
     best = None
     for n_lines in (1, 2):
         freqs0 = [f0] if n_lines == 1 else [f0, _second_peak(t, y, f0)]
@@ -340,10 +337,9 @@ def _fit_tail(t, y, f0, *, t0=None, start=None):
         def resid(x, n=n_lines):
             return _linear_fit(t, y, t0, x[:n], np.abs(x[n:]))
 
-        fit = _scipy_lsq(resid, x0, method="lm", max_nfev=200 * x0.size)
-        r = fit.fun
+        x, r = least_squares(resid, x0, max_nfev=200 * x0.size)
         if best is None or np.sum(r**2) < 0.9 * best[2]:
-            best = (fit.x[:n_lines], np.abs(fit.x[n_lines:]), float(np.sum(r**2)))
+            best = (x[:n_lines], np.abs(x[n_lines:]), float(np.sum(r**2)))
     return best[0], best[1]
 
 

@@ -32,7 +32,6 @@ adaptive step, differentiable), for checks of the slow flow and for forced (base
 The Coulomb term is smoothed there as ``F tanh(u'/v_s)`` to stay differentiable.
 """
 
-import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -182,6 +181,8 @@ def nonlinear_response(
     Returns:
         ``(u, u')`` at ``t``: the deflection relative to the base and its velocity.
     """
+    import diffrax  # here: importing the model package (every calibration) does not load it
+
     t = jnp.asarray(t, dtype=float)
     w0 = mode.omega0
     drive = None if base_acc is None else diffrax.LinearInterpolation(t, jnp.asarray(base_acc))

@@ -1,0 +1,110 @@
+"""The calibration's light replacements give what they replace.
+
+The warm command line avoids SciPy (its import costs more than the fit) and JAX calls outside
+the compiled program (each costs a lowering and a cache read): the χ² survival function in
+closed form against ``scipy.stats.chi2``, the release finder's Levenberg–Marquardt against
+``scipy.optimize.least_squares(method="lm")`` on the finder's own fits, and the amplitude test
+on what the compiled program returns against the same test computed with JAX afterwards.
+"""
+
+import numpy as np
+import pytest
+
+import whiskerid as wi
+from whiskerid.fit import _release
+from whiskerid.fit._chi2 import chi2_sf
+from whiskerid.fit._lm import least_squares
+
+
+@pytest.mark.parametrize("k", [1, 2, 3, 4, 5, 8, 11])
+def test_chi2_survival_matches_scipy(k):
+    from scipy.stats import chi2
+
+    x = np.concatenate([np.geomspace(1e-6, 900.0, 60), [k - 1.0, k, k + 1.0]])
+    ours = np.array([chi2_sf(v, k) for v in x])
+    theirs = chi2.sf(x, k)
+    assert np.all(np.abs(ours - theirs) <= 1e-12 * theirs + 1e-300)
+    assert chi2_sf(0.0, k) == 1.0 and chi2_sf(np.inf, k) == 0.0
+    with pytest.raises(ValueError, match="whole number"):
+        chi2_sf(1.0, 1.5)
+
+
+def _two_lines(seed):
+    rng = np.random.default_rng(seed)
+    t = np.arange(600) / 200.0
+    f = rng.uniform(15.0, 35.0)  # the second line at 1.7 f stays below 100 Hz
+    y = 3.0 + 0.2 * t + np.exp(-rng.uniform(0.5, 3.0) * t) * np.cos(2 * np.pi * f * t + 0.3)
+    y += 0.3 * np.exp(-5.0 * t) * np.sin(2 * np.pi * 1.7 * f * t)
+    return t, y + 0.01 * rng.standard_normal(t.size), f
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_levenberg_marquardt_finds_scipys_optimum_of_the_decay_fit(seed):
+    """The release finder's variable-projection fit (one and two damped lines, started
+    3 % off), solved by ours and by MINPACK's: the same frequencies to 1e-7, the rates (the
+    flattest directions) to 1e-5, the same sum of squares to 1e-9."""
+    from scipy.optimize import least_squares as scipy_lsq
+
+    t, y, f = _two_lines(seed)
+    for x0 in ([1.03 * f, 1.0], [1.03 * f, 1.7 * f, 1.0, 4.0]):
+        x0 = np.array(x0)
+        n = x0.size // 2
+
+        def resid(x, n=n):
+            return _release._linear_fit(t, y, t[0], x[:n], np.abs(x[n:]))
+
+        ours, r = least_squares(resid, x0, max_nfev=200 * x0.size)
+        ref = scipy_lsq(resid, x0, method="lm", max_nfev=200 * x0.size)
+        assert np.allclose(np.abs(ours[:n]), np.abs(ref.x[:n]), rtol=1e-7), (ours, ref.x)
+        assert np.allclose(np.abs(ours[n:]), np.abs(ref.x[n:]), rtol=1e-5), (ours, ref.x)
+        assert r @ r <= (ref.fun @ ref.fun) * (1 + 1e-9)
+
+
+def test_levenberg_marquardt_stops_within_its_budget():
+    calls = []
+
+    def fun(x):
+        calls.append(1)
+        return np.array([10 * (x[1] - x[0] ** 2), 1 - x[0]])  # Rosenbrock
+
+    x, _ = least_squares(fun, np.array([-1.2, 1.0]), max_nfev=400)
+    assert np.allclose(x, [1.0, 1.0], atol=1e-6)
+    calls.clear()
+    least_squares(fun, np.array([-1.2, 1.0]), max_nfev=10)
+    assert len(calls) <= 10
+
+
+@pytest.mark.slow  # a calibration compiled (about 20 s on a loaded machine)
+def test_amplitude_test_reads_from_the_program_what_jax_computes_afterwards(monkeypatch):
+    """The score tests read mode 1's columns, w0, ζ0, the tip factor and the fitted linear
+    part from the compiled calibration; computed again with JAX at the fit's optimum they
+    are the same, and so is the test on them."""
+    from whiskerid.fit import _amplitude
+
+    seen = {}
+    real = _amplitude.amplitude_test
+
+    def spy(cal, **kw):
+        seen.update(kw)
+        return real(cal, **kw)
+
+    monkeypatch.setattr(_amplitude, "amplitude_test", spy)
+    record = wi.paper_record()
+    sim = wi.simulate(record, excitation="decay", observable="adc", rate_hz=200.0,
+                      duration_s=5.0, noise_db=30.0, seed=4, tip_deflection_m=2e-3)  # fmt: skip
+    obs = wi.Observation(sim.t, sim.signal(), excitation="decay", observable="adc", gain=None)
+    cal = wi.calibrate(record, obs)
+    program = seen["core"]
+    again = _amplitude._whisker_terms(cal.problem, cal.optimum)
+    assert program["w0"] == pytest.approx(again["w0"], rel=1e-12)
+    assert program["zeta0"] == pytest.approx(again["zeta0"], rel=1e-12)
+    assert np.allclose(program["tip"], again["tip"], rtol=1e-12)
+    for key in ("mode1", "dc"):
+        for a, b in zip(program[key], again[key], strict=True):
+            assert a.shape == b.shape
+            assert np.allclose(a, b, rtol=1e-9, atol=1e-9 * np.max(np.abs(b)))
+    test = real(cal, resid=seen["resid"], jac=seen["jac"], core=again)
+    for name in ("nonlinear", "split"):
+        ours = cal.diagnostics["amplitude_test"][name]
+        assert ours["statistic"] == pytest.approx(test[name]["statistic"], rel=1e-8)
+        assert ours["p_value"] == pytest.approx(test[name]["p_value"], rel=1e-6, abs=1e-300)
