@@ -59,6 +59,7 @@ from ._core import fit_problem
 from ._modulus import MODULUS_TOLERANCE, check_tolerance, modulus_covariance
 from ._observation import CalibrationError, Observation, StaticTest
 from ._problem import FitProblem, reported_names
+from ._threads import single_blas_thread
 
 #: A fit is converged when the solver says so, or when no parameter direction has a cosine
 #: with the residuals above this (MINPACK's ``gtol``).
@@ -144,6 +145,7 @@ class Calibration:
 # --------------------------------------------------------------------------- calibrate
 
 
+@single_blas_thread  # small host-side solves: threads only wait on a busy machine
 def calibrate(
     record: WhiskerRecord,
     observations: list[Observation] | Observation,

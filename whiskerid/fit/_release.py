@@ -45,6 +45,7 @@ import numpy as np
 
 from ._lm import least_squares
 from ._signal import _interpolate
+from ._threads import single_blas_thread
 
 #: Residual scales (robust RMS of the tail fit) within which a stretch is "still the decay".
 TOLERANCE = 4.0
@@ -81,6 +82,7 @@ class Decay:
         return f"{self.start_s:.4f} s to {self.end_s:.4f} s ({how})"
 
 
+@single_blas_thread
 def find_decays(t: np.ndarray, y: np.ndarray) -> list[Decay]:
     """The free decays in a recording, in time order (see the module docstring).
 
