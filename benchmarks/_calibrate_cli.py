@@ -28,7 +28,7 @@ PAPER = HERE.parent / "fits" / "paper-whisker.toml"
 #: A warm run taken apart (run in a child process; prints one JSON line on stderr).
 SPLIT = r"""
 import time, json, sys
-T0 = time.perf_counter(); W0 = time.time()
+T0 = time.perf_counter(); W0 = time.time(); C = {"start": time.process_time()}
 from whiskerid.cli._cache import enable_compile_cache
 enable_compile_cache()
 import jax
@@ -39,10 +39,10 @@ jax.monitoring.register_event_duration_secs_listener(listen)
 t = {"start": T0}
 import whiskerid.fit, whiskerid.model
 from whiskerid.fit import _aot
-t["imports"] = time.perf_counter()
+t["imports"] = time.perf_counter(); C["imports"] = time.process_time()
 record = whiskerid.model.load_record(sys.argv[2])
 obs = whiskerid.fit.observations_from_file(sys.argv[1], record)
-t["read"] = time.perf_counter()
+t["read"] = time.perf_counter(); C["read"] = time.process_time()
 load = [0.0]
 inner = _aot._load_or_build
 def timed(*a, **k):
@@ -50,10 +50,10 @@ def timed(*a, **k):
     return out
 _aot._load_or_build = timed
 cal = whiskerid.fit.calibrate(record, obs)
-t["calibrate"] = time.perf_counter()
+t["calibrate"] = time.perf_counter(); C["calibrate"] = time.process_time()
 cal.record.save(sys.argv[3])
 print(cal.report(), file=open("/dev/null", "w"))
-t["write"] = time.perf_counter()
+t["write"] = time.perf_counter(); C["write"] = time.process_time()
 out = {
     "imports_s": t["imports"] - T0,
     "read_s": t["read"] - t["imports"],
@@ -64,6 +64,12 @@ out = {
     "end_wall": time.time(),
     "start_wall": W0,
     "jax_events_s": {k.rsplit("/", 1)[-1]: round(v, 4) for k, v in ev.items()},
+    "cpu_s": {
+        "to_imports_done": C["imports"],
+        "read": C["read"] - C["imports"],
+        "calibrate": C["calibrate"] - C["read"],
+        "write": C["write"] - C["calibrate"],
+    },
 }
 print("SPLIT " + json.dumps(out), file=sys.stderr)
 """
@@ -149,13 +155,16 @@ def cli(repeats: int = 3) -> dict:
     res["cold_over_scipy"] = res["cli_cold_s"] / res["scipy_script_s"]
     # Where a warm run's time goes (one instrumented run, and a bare interpreter's start).
     res["python_start_s"] = _run([sys.executable, "-c", "pass"], env, repeats)[0]
-    wall, _, split = _run([sys.executable, "-c", SPLIT, str(files[5.0]), str(PAPER), str(out)],
-                          env)  # fmt: skip
+    wall, cpu, split = _run([sys.executable, "-c", SPLIT, str(files[5.0]), str(PAPER), str(out)],
+                            env)  # fmt: skip
     line = next(x for x in split.stderr.splitlines() if x.startswith("SPLIT "))
     parts = json.loads(line[6:])
     parts["start_and_exit_s"] = wall - parts.pop("inside_s")
     parts.pop("end_wall"), parts.pop("start_wall")
+    parts["cpu_s"] = {k: round(v, 3) for k, v in parts["cpu_s"].items()}
     res["warm_split"] = {k: (round(v, 3) if isinstance(v, float) else v)
                          for k, v in parts.items()}  # fmt: skip
     res["warm_split_wall_s"] = round(wall, 3)
+    res["warm_split_cpu_s"] = round(cpu, 3)
+    res["load_average_1min"] = round(os.getloadavg()[0], 2)
     return res

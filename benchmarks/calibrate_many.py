@@ -20,6 +20,7 @@ Run: ``python benchmarks/calibrate_many.py [--whiskers N] [--duration S]`` (prin
 
 import argparse
 import json
+import os
 import platform
 import statistics
 import time
@@ -83,19 +84,20 @@ def main() -> None:
         observations.append(
             wi.Observation(sim.t, sim.signal(), excitation="decay", observable="adc", gain=None)
         )
-    times, compiles, f1_err, zeta_err, ok, status = [], [], [], [], [], []
+    times, cpu, compiles, f1_err, zeta_err, ok, status = [], [], [], [], [], [], []
     for rec, obs in zip(records, observations, strict=True):
         before = len(_COMPILES)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         cal = wi.calibrate(_nominal(rec), obs)
         times.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
         compiles.append(len(_COMPILES) - before)
         w = rec.whisker()
         f1_err.append(cal.params["f1_hz"]["value"] / float(w.natural_frequencies_hz[0]) - 1)
         zeta_err.append(cal.params["zeta"]["value"] / float(w.zeta[0]) - 1)
         ok.append(cal.ok)
         status.append(cal.status)
-    scipy_times, scipy_f1_err = [], []
+    scipy_times, scipy_cpu, scipy_f1_err = [], [], []
     import sys
     from pathlib import Path
 
@@ -105,10 +107,11 @@ def main() -> None:
     for rec, obs in zip(records, observations, strict=True):
         w = rec.whisker()
         f = np.asarray(w.natural_frequencies_hz)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         sp = scipy_fit(obs.t, obs.y, ratio=float(f[1] / f[0]),
                        conversion_s=rec.adc.conversion_time_s)  # fmt: skip
         scipy_times.append(time.perf_counter() - t0)
+        scipy_cpu.append(time.process_time() - c0)
         scipy_f1_err.append(sp["f1_hz"] / float(f[0]) - 1)
     peer_times, peer_compiles = [], []
     for rec, obs in list(zip(records, observations, strict=True))[1 : 1 + args.peer_fits]:
@@ -130,6 +133,7 @@ def main() -> None:
                 "first_fit_s": round(times[0], 3),
                 "warm_fit_s_median": round(statistics.median(times[1:]), 4),
                 "warm_fit_s_min": round(min(times[1:]), 4),
+                "warm_fit_cpu_s_median": round(statistics.median(cpu[1:]), 4),
                 "all_fits_s": round(sum(times), 2),
                 "converged": int(sum(ok)),
                 "peer_recompiled_fit_s_median": (
@@ -150,10 +154,15 @@ def main() -> None:
                 "zeta_rel_error_median": float(np.median(np.abs(zeta_err))),
                 "f1_within_0.1%": int(np.sum(np.abs(f1_err) < 1e-3)),
                 "scipy_fit_s_median": round(statistics.median(scipy_times), 4),
+                "scipy_fit_cpu_s_median": round(statistics.median(scipy_cpu), 4),
                 "scipy_f1_within_0.1%": int(np.sum(np.abs(scipy_f1_err) < 1e-3)),
                 "warm_over_scipy": round(
                     statistics.median(times[1:]) / statistics.median(scipy_times), 3
                 ),
+                "warm_over_scipy_cpu": round(
+                    statistics.median(cpu[1:]) / statistics.median(scipy_cpu), 3
+                ),
+                "load_average_1min": round(os.getloadavg()[0], 2),
                 "jax": jax.__version__,
                 "cpu": platform.processor() or platform.machine(),
             },
