@@ -145,7 +145,7 @@ class Calibration:
 # --------------------------------------------------------------------------- calibrate
 
 
-@single_blas_thread  # small host-side solves: threads only wait on a busy machine
+@single_blas_thread(jax_lapack=True)  # small solves: threads only wait on a busy machine
 def calibrate(
     record: WhiskerRecord,
     observations: list[Observation] | Observation,
