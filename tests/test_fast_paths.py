@@ -108,3 +108,27 @@ def test_amplitude_test_reads_from_the_program_what_jax_computes_afterwards(monk
         ours = cal.diagnostics["amplitude_test"][name]
         assert ours["statistic"] == pytest.approx(test[name]["statistic"], rel=1e-8)
         assert ours["p_value"] == pytest.approx(test[name]["p_value"], rel=1e-6, abs=1e-300)
+
+
+def test_blas_is_held_to_one_thread_while_a_release_is_searched_and_restored_after():
+    from threadpoolctl import threadpool_info
+
+    from whiskerid.fit import _threads
+
+    seen = []
+    real = _release._decay_in
+
+    def spy(*args, **kwargs):
+        seen.append({i["filepath"]: i["num_threads"] for i in threadpool_info()
+                     if i["user_api"] == "blas"})  # fmt: skip
+        return real(*args, **kwargs)
+
+    before = {i["filepath"]: i["num_threads"] for i in threadpool_info()}
+    t, y, _ = _two_lines(0)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(_release, "_decay_in", spy)
+        _release.find_decays(t, y)
+    assert seen and all(n == 1 for s in seen for n in s.values())
+    assert {i["filepath"]: i["num_threads"] for i in threadpool_info()} == before
+    with _threads.one_blas_thread(jax_lapack=True):
+        assert all(i["num_threads"] == 1 for i in threadpool_info() if i["user_api"] == "blas")
