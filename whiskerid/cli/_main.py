@@ -34,6 +34,7 @@ from . import (
 from ._cache import enable_compile_cache
 from ._common import (
     CommandError,
+    Interrupted,
     add_quiet_everywhere,
     json_safe,
     one_line,
@@ -142,18 +143,25 @@ def _run(args, start: float, *, fast_exit: bool) -> int:
     ticker = start_progress(
         f"whiskerid {name}", show=show_progress(args) and name not in _OWN_PROGRESS
     )
-    with start_command() as policy:
+    with start_command(keep=fast_exit) as policy:
         try:
             with ticker:
                 result = args.func(args)
         except _EXPECTED as err:
+            if policy.signum is not None:  # the interrupt, wrapped (a JAX host callback's)
+                return _interrupted(args, policy, Interrupted(policy.signum))
             print(f"whiskerid {args.command}: error: {one_line(err)}", file=sys.stderr)
             return 2
         except KeyboardInterrupt as err:
-            policy.stopping = True  # from here on a signal would land in the teardown
-            # One line, no traceback: what was kept, or that nothing was written.
-            print(f"whiskerid {args.command}: {policy.report(err)}", file=sys.stderr)
-            return policy.status(err)
+            return _interrupted(args, policy, err)
+        except Exception:
+            if policy.signum is None:
+                raise
+            # A signal came, and the command failed after it (the interrupt swallowed by a
+            # library that then went on with what it had): the signal's status, no traceback.
+            return _interrupted(args, policy, Interrupted(policy.signum))
+        if policy.lost():  # swallowed where it landed, or it came as the command ended
+            return _interrupted(args, policy, Interrupted(policy.signum))
         if getattr(args, "json", False):
             result = {
                 "command": args.command,
@@ -165,6 +173,15 @@ def _run(args, start: float, *, fast_exit: bool) -> int:
     if fast_exit and name in _FAST_EXIT:
         _exit_now(0)
     return 0
+
+
+def _interrupted(args, policy, err: BaseException) -> int:
+    """Say in one line, no traceback, what was kept (or that nothing was written); the exit
+    status for the signal."""
+    policy.stopping = True  # from here on a signal would land in the teardown
+    status = policy.status(err)  # before the line: a signal after it exits with this status
+    print(f"whiskerid {args.command}: {policy.report(err)}", file=sys.stderr)
+    return status
 
 
 def _exit_now(status: int) -> None:
