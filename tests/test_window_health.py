@@ -9,6 +9,7 @@ from whiskerid.hw import OnlineClassifier
 import whiskerid as wi
 from whiskerid.classify import HealthReference, TrainConfig, load_dataset, window_health
 from whiskerid.classify._health import descriptors, sensor_fault, white_flatness
+from whiskerid.classify._health_modes import mode_prominence
 
 RATE = 200.0
 LEVEL = 13200  # ADC codes of 1.65 V at ±4.096 V full scale: a Hall sensor at rest
@@ -146,3 +147,54 @@ def test_training_on_noise_like_windows_turns_the_noise_check_off():
     ref = HealthReference.fit(w, np.repeat([0, 1], 100))
     assert ref.noise_flatness is None and ref.out_of_range(rng.standard_normal(200)) is None
     assert "amplitude" in ref.out_of_range(1e4 * rng.standard_normal(200))
+
+
+def _coloured(rng, n: int, corner_hz: float, rms: float) -> np.ndarray:
+    """Electrical noise through a first-order low-pass: not flat in spectrum, yet with
+    nothing standing out anywhere (what a dead input behind a filter gives)."""
+    a = np.exp(-2 * np.pi * corner_hz / RATE)
+    y = lfilter([1 - a], [1.0, -a], rng.standard_normal(n + 200))[200:]
+    return np.round(LEVEL + rms * y / y.std())
+
+
+def test_the_mode_check_finds_the_training_resonance_and_rejects_what_lacks_it(model):
+    """The reference's modes are the training windows' resonances (five whiskers of 35 to
+    47 Hz here: one or two modes in that span); white noise reaches the threshold in about
+    0.1 % of windows."""
+    ref = model.health
+    assert ref.rate_hz == RATE and 1 <= len(ref.modes_hz) <= 2
+    assert all(33 <= f <= 49 for f in ref.modes_hz) and ref.mode_floor is not None
+    rng = np.random.default_rng(21)
+    noise = rng.standard_normal((4000, 200))
+    caught = mode_prominence(noise, RATE, ref.modes_hz)[:, 0] < ref.mode_floor
+    assert 0.995 <= caught.mean() < 1.0  # one in a thousand passes: 0.999 expected
+    # Coloured noise at the level and amplitude of the training windows: not flat (the
+    # noise check passes it), and no whisker near the mode.
+    for corner in (5.0, 20.0):
+        x = _coloured(rng, 1600, corner, 10.0)
+        res = model.classify_recording(_recording(x))
+        assert {w["label"] for w in res["windows"]} == {"unknown"}, corner
+        assert "no whisker response" in res["reason"]
+
+
+def test_a_mode_threshold_is_kept_and_checked_in_the_model_file(model, tmp_path):
+    back = wi.ClassifierModel.load(model.save(tmp_path / "m"))
+    assert back.health.modes_hz == model.health.modes_hz
+    assert back.health.mode_floor == model.health.mode_floor
+    head = (tmp_path / "m" / "model.json").read_text()
+    (tmp_path / "m" / "model.json").write_text(head.replace('"modes_hz": [', '"modes_hz": [150, '))
+    with pytest.raises(wi.ModelError, match="corrupt health reference"):
+        wi.ClassifierModel.load(tmp_path / "m")
+
+
+def test_on_another_whisker_only_the_noise_check_applies():
+    """Another whisker has its own offset, gain and mode: a louder, shifted resonance is not
+    refused, electrical noise still is."""
+    rng = np.random.default_rng(8)
+    train = np.stack([_whisker(rng, 200, 40.0, 4.0) for _ in range(300)])
+    ref = HealthReference.fit(train, rate_hz=RATE, modes_hz=(40.0,))
+    assert ref.mode_floor is not None and ref.train_rejection <= 0.01
+    other = ref.for_whisker()
+    louder = 5 * (_whisker(rng, 200, 25.0, 40.0) - LEVEL) + 3 * LEVEL  # another gain, offset
+    assert ref.out_of_range(louder) is not None and other.out_of_range(louder) is None
+    assert "noise-like" in other.out_of_range(LEVEL + 8 * rng.standard_normal(200))

@@ -137,11 +137,12 @@ class ClassifierModel:
         (:func:`whiskerid.classify.window_health`).
 
         The training data's reference applies while the model reads its own whisker's
-        recordings; on another whisker (:meth:`use_whisker`) whose resonance shapes the
-        spectrum differently, only the sensor-fault checks do.
+        recordings; on another whisker (:meth:`use_whisker`), with its own offset, gain and
+        modes, the noise check does (:meth:`HealthReference.for_whisker`).
         """
-        own = self.recorded_with is self.whisker
-        return window_health(samples, self.health if own else None)
+        if self.health is None or self.recorded_with is self.whisker:
+            return window_health(samples, self.health)
+        return window_health(samples, self.health.for_whisker())
 
     @property
     def needs_whisker(self) -> bool:
