@@ -104,6 +104,7 @@ def main(argv=None) -> int:
         for name, m in models.items():
             h = m.health
             res = {"modes_hz": h.modes_hz, "mode_floor": h.mode_floor,
+                   "mode_noise_caught": h.mode_noise_caught,
                    "train_rejection": h.train_rejection,
                    "held_out_seed_7": rates(m, test.windows),
                    "emulated_chip": rates(m, emu),

@@ -31,9 +31,9 @@ def _recording(x, **meta) -> wi.Recording:
 
 
 @pytest.fixture(scope="module")
-def model(tmp_path_factory):
-    """A model of two 'terrains' (the resonance driven softly or hard, with a second mode)
-    from 5 recordings each of 10 s."""
+def train_set(tmp_path_factory):
+    """Two 'terrains' (the resonance driven softly or hard, with a second mode), 5
+    recordings each of 10 s."""
     root = tmp_path_factory.mktemp("health")
     rng = np.random.default_rng(0)
     for label, drive in (("soft", 4.0), ("hard", 20.0)):
@@ -42,8 +42,12 @@ def model(tmp_path_factory):
             if label == "hard":
                 x += np.round(_whisker(rng, 2000, 70.0, drive / 2) - LEVEL)
             wi.write_csv(root / label / f"{label}{r}.csv", _recording(x))
-    ws = load_dataset(root)
-    return wi.train_classifier(ws, config=FAST)
+    return load_dataset(root)
+
+
+@pytest.fixture(scope="module")
+def model(train_set):
+    return wi.train_classifier(train_set, config=FAST)
 
 
 @pytest.mark.parametrize(
@@ -157,7 +161,7 @@ def _coloured(rng, n: int, corner_hz: float, rms: float) -> np.ndarray:
     return np.round(LEVEL + rms * y / y.std())
 
 
-def test_the_mode_check_finds_the_training_resonance_and_rejects_what_lacks_it(model):
+def test_the_mode_check_finds_the_training_resonance_and_rejects_what_lacks_it(model, train_set):
     """The reference's modes are the training windows' resonances (five whiskers of 35 to
     47 Hz here: one or two modes in that span); white noise reaches the threshold in about
     0.1 % of windows."""
@@ -166,15 +170,28 @@ def test_the_mode_check_finds_the_training_resonance_and_rejects_what_lacks_it(m
     assert all(33 <= f <= 49 for f in ref.modes_hz) and ref.mode_floor is not None
     rng = np.random.default_rng(21)
     noise = rng.standard_normal((4000, 200))
-    caught = mode_prominence(noise, RATE, ref.modes_hz)[:, 0] < ref.mode_floor
-    assert 0.995 <= caught.mean() < 1.0  # one in a thousand passes: 0.999 expected
+    caught = mode_prominence(noise, RATE, ref.modes_hz).max(axis=1) < ref.mode_floor
+    # At most one in a thousand passes (the threshold is lowered only as far as the
+    # training windows' weakest need, while it still catches 90 %)
+    assert ref.mode_noise_caught >= 0.9 and caught.mean() == pytest.approx(
+        ref.mode_noise_caught, abs=0.01
+    )
+    assert (
+        np.mean(mode_prominence(train_set.windows, RATE, ref.modes_hz).max(axis=1) < ref.mode_floor)
+        <= 0.005
+    )
     # Coloured noise at the level and amplitude of the training windows: not flat (the
-    # noise check passes it), and no whisker near the mode.
+    # noise check passes much of it), and no whisker near the mode (measured: 97 % and
+    # 98 % of windows refused, 97 % and 52 % by the mode check).
     for corner in (5.0, 20.0):
-        x = _coloured(rng, 1600, corner, 10.0)
-        res = model.classify_recording(_recording(x))
-        assert {w["label"] for w in res["windows"]} == {"unknown"}, corner
-        assert "no whisker response" in res["reason"]
+        why = [model.window_health(_coloured(rng, 200, corner, 10.0)) for _ in range(300)]
+        assert np.mean([w is not None and w[0] == "unknown" for w in why]) >= 0.93, corner
+        assert any(w is not None and "no whisker response" in w[1] for w in why)
+    # One recording of it: its windows get no terrain but for a few at most.
+    res = model.classify_recording(_recording(_coloured(rng, 2000, 5.0, 10.0)))
+    assert res["fault_windows"] >= 8 and "no whisker response" in " ".join(
+        w.get("reason", "") for w in res["windows"]
+    )
 
 
 def test_a_mode_threshold_is_kept_and_checked_in_the_model_file(model, tmp_path):

@@ -36,7 +36,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ._health_modes import mode_prominence, training_modes, white_prominence
+from ._health_modes import mode_prominence, training_modes, white_detection, white_prominence
 
 SENSOR_FAULT = "sensor-fault"
 UNKNOWN = "unknown"
@@ -48,6 +48,10 @@ NOISE_QUANTILE = 0.001
 #: Noise-like training windows beyond this share: the model was trained on windows that
 #: look like noise, so it cannot call noise unknown (the noise check is left off).
 NOISE_TRAIN_LIMIT = 0.01
+#: The mode threshold is at most the prominence this share of training windows stay below.
+MODE_TRAIN_QUANTILE = 0.005
+#: The mode check is kept only while its threshold catches this share of white noise.
+MIN_NOISE_CAUGHT = 0.9
 #: An amplitude (RMS) more than this factor beyond every training window's is far outside
 #: training: wide, since a new recording may be quieter or rougher than any trained on.
 RMS_MARGIN = 10.0
@@ -119,9 +123,12 @@ class HealthReference:
         modes_hz: Where the whisker's response stands out (Hz, below Nyquist): the
             calibrated whisker's mode, or the training windows' resonance
             (:mod:`whiskerid.classify._health_modes`).
-        mode_floor: Mode prominence (log10) a window must reach in some channel
-            (:func:`white_prominence`); None when the check is off (no rate, or training
-            windows below it too often, :data:`NOISE_TRAIN_LIMIT`).
+        mode_floor: Mode prominence (log10) a window must reach in some channel: white
+            noise's 99.9 % quantile (:func:`white_prominence`), or the training windows'
+            :data:`MODE_TRAIN_QUANTILE` quantile where lower; None when the check is off
+            (no rate, or a threshold that catches less than :data:`MIN_NOISE_CAUGHT` of
+            white noise).
+        mode_noise_caught: Share of white-noise windows below ``mode_floor``.
         ranges: Whether the level and amplitude ranges apply (not on another whisker,
             whose offset and gain differ: :meth:`for_whisker`).
     """
@@ -134,6 +141,7 @@ class HealthReference:
     modes_hz: tuple[float, ...] = ()
     mode_floor: float | None = None
     ranges: bool = True
+    mode_noise_caught: float | None = None
 
     @classmethod
     def fit(cls, windows, labels=None, *, rate_hz: float | None = None,
@@ -154,11 +162,16 @@ class HealthReference:
                   noise if np.mean(noisy) <= NOISE_TRAIN_LIMIT else None)  # fmt: skip
         if rate_hz is not None:
             modes = tuple(float(f) for f in (modes_hz or training_modes(w, rate_hz)))
-            floor = white_prominence(w.shape[-1], float(rate_hz), modes)
-            weak = np.max(mode_prominence(w, rate_hz, modes), axis=1) < floor
-            on = np.mean(weak) <= NOISE_TRAIN_LIMIT
+            prom = np.max(mode_prominence(w, rate_hz, modes), axis=1)
+            # White noise's 99.9 % quantile, lowered where the training windows' own
+            # weakest reach below it (slow runs over soft ground excite the mode little):
+            # kept while it still catches most white noise.
+            floor = min(white_prominence(w.shape[-1], float(rate_hz), modes),
+                        float(np.quantile(prom, MODE_TRAIN_QUANTILE, method="lower")))  # fmt: skip
+            caught = white_detection(w.shape[-1], float(rate_hz), modes, floor)
             ref = replace(ref, rate_hz=float(rate_hz), modes_hz=modes,
-                          mode_floor=floor if on else None)  # fmt: skip
+                          mode_floor=floor if caught >= MIN_NOISE_CAUGHT else None,
+                          mode_noise_caught=caught)  # fmt: skip
         rejected = np.mean([ref.out_of_range(x) is not None for x in w])
         return replace(ref, train_rejection=float(rejected))
 
@@ -208,6 +221,7 @@ class HealthReference:
             "rate_hz": self.rate_hz,
             "modes_hz": list(self.modes_hz),
             "mode_floor": self.mode_floor,
+            "mode_noise_caught": self.mode_noise_caught,
         }
 
     def for_whisker(self) -> "HealthReference":
@@ -231,6 +245,8 @@ class HealthReference:
                   None if rate is None else float(rate),
                   tuple(float(f) for f in d.get("modes_hz", ())),
                   None if floor is None else float(floor))  # fmt: skip
+        if (caught := d.get("mode_noise_caught")) is not None:
+            ref = replace(ref, mode_noise_caught=float(caught))
         if ref.mode_floor is not None and not (ref.rate_hz and ref.modes_hz):
             raise ValueError("a mode threshold without its rate or modes")
         if not all(0 < f < (ref.rate_hz or np.inf) / 2 for f in ref.modes_hz):

@@ -85,12 +85,23 @@ def _prominence(p: np.ndarray, n: int, rate_hz: float, modes_hz) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=16)
+def _white(n: int, rate_hz: float, modes_hz: tuple[float, ...]) -> np.ndarray:
+    """The prominence of 20 000 white-noise windows of ``n`` samples (fixed seed), sorted."""
+    x = np.random.default_rng(1).standard_normal((20_000, n))
+    return np.sort(mode_prominence(x, rate_hz, modes_hz)[:, 0])
+
+
 def white_prominence(n: int, rate_hz: float, modes_hz: tuple[float, ...]) -> float:
     """The prominence that all but ``1 − MODE_QUANTILE`` of white-noise windows of ``n``
-    samples stay below (20 000 windows, fixed seed; about 0.7 for one mode at 46 Hz in
-    200 samples at 200 Hz, where the mean is about 0.16)."""
-    x = np.random.default_rng(1).standard_normal((20_000, n))
-    return float(np.quantile(mode_prominence(x, rate_hz, modes_hz)[:, 0], MODE_QUANTILE))
+    samples stay below (about 0.7 for one mode at 46 Hz in 200 samples at 200 Hz, where
+    the mean is about 0.16)."""
+    return float(np.quantile(_white(n, rate_hz, tuple(modes_hz)), MODE_QUANTILE))
+
+
+def white_detection(n: int, rate_hz: float, modes_hz: tuple[float, ...], floor: float) -> float:
+    """Share of white-noise windows of ``n`` samples whose prominence is below ``floor``."""
+    w = _white(n, rate_hz, tuple(modes_hz))
+    return float(np.searchsorted(w, floor) / w.size)
 
 
 def training_modes(windows, rate_hz: float) -> tuple[float, ...]:
