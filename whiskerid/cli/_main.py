@@ -10,6 +10,7 @@ answers without starting JAX: the run functions import what they use.
 """
 
 import argparse
+import gc
 import json
 import os
 import signal
@@ -36,6 +37,7 @@ from ._common import (
     CommandError,
     Interrupted,
     add_quiet_everywhere,
+    interrupts,
     json_safe,
     one_line,
     show_progress,
@@ -124,7 +126,13 @@ def main(argv: list[str] | None = None) -> int:
     enable_compile_cache()
     start = time.perf_counter()
     try:
-        return _run(args, start, fast_exit=argv is None)
+        status = _run(args, start, fast_exit=argv is None)
+        if argv is None and interrupts().exit_status is not None:
+            # Stopped on a signal, its outputs closed and the line said: the interpreter's
+            # teardown (JAX's, XLA's) is where a crash or another signal would land.
+            gc.collect()  # files a traceback kept open are closed (and flushed) first
+            _exit_now(status)
+        return status
     except BrokenPipeError:
         # The reader left (``| head``): what it read is all it wanted. No traceback, and
         # nothing more written to the closed pipe at exit.
