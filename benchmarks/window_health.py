@@ -119,7 +119,11 @@ def main(argv=None) -> int:
             modes = (whisker_mode(other, RATE, m.window),)  # where the mode check would look
             res = {"mode_hz": modes,
                    "held_out": rates(m, load_dataset(tmp / f"v{ratio}").windows, modes),
-                   "dead": {k: rates(m, w, modes) for k, w in dead.items()}}  # fmt: skip
+                   "dead": {k: rates(m, w, modes) for k, w in dead.items()},
+                   "gain_ratio": m._other_health.rms_gain}  # fmt: skip
+            held = load_dataset(tmp / f"v{ratio}").windows
+            absurd = (held - np.median(held)) * 1e3 + np.median(held)
+            res["x1000 amplitude"] = rates(m, absurd, modes)
             out[f"whisker on f1 x{ratio}"] = res
     out["elapsed_s"] = round(time.perf_counter() - t0, 1)
     print(json.dumps(out, indent=1))

@@ -206,12 +206,17 @@ def test_a_mode_threshold_is_kept_and_checked_in_the_model_file(model, tmp_path)
 
 def test_on_another_whisker_only_the_noise_check_applies():
     """Another whisker has its own offset, gain and mode: a louder, shifted resonance is not
-    refused, electrical noise still is."""
+    refused, electrical noise still is, and an amplitude far beyond that whisker's gain."""
     rng = np.random.default_rng(8)
     train = np.stack([_whisker(rng, 200, 40.0, 4.0) for _ in range(300)])
     ref = HealthReference.fit(train, rate_hz=RATE, modes_hz=(40.0,))
     assert ref.mode_floor is not None and ref.train_rejection <= 0.01
     other = ref.for_whisker()
-    louder = 5 * (_whisker(rng, 200, 25.0, 40.0) - LEVEL) + 3 * LEVEL  # another gain, offset
+    louder = 5 * (_whisker(rng, 200, 25.0, 4.0) - LEVEL) + 3 * LEVEL  # another gain, offset
     assert ref.out_of_range(louder) is not None and other.out_of_range(louder) is None
     assert "noise-like" in other.out_of_range(LEVEL + 8 * rng.standard_normal(200))
+    # With that whisker's gain (5 here), its amplitude range: the louder whisker passes,
+    # a thousand times more is refused.
+    scaled = ref.for_whisker(5.0)
+    assert scaled.out_of_range(louder) is None
+    assert "amplitude" in scaled.out_of_range(1000 * (louder - 3 * LEVEL))

@@ -129,6 +129,8 @@ class HealthReference:
             (no rate, or a threshold that catches less than :data:`MIN_NOISE_CAUGHT` of
             white noise).
         mode_noise_caught: Share of white-noise windows below ``mode_floor``.
+        rms_gain: On another whisker, the factor its response puts on the amplitude range
+            (the range then applies without ``ranges``); None: no such scaling.
         ranges: Whether the level and amplitude ranges apply (not on another whisker,
             whose offset and gain differ: :meth:`for_whisker`).
     """
@@ -142,6 +144,7 @@ class HealthReference:
     mode_floor: float | None = None
     ranges: bool = True
     mode_noise_caught: float | None = None
+    rms_gain: float | None = None
 
     @classmethod
     def fit(cls, windows, labels=None, *, rate_hz: float | None = None,
@@ -193,19 +196,20 @@ class HealthReference:
                         f"{10 ** prom.max():.2g}x the local floor, white noise reaches "
                         f"{10**self.mode_floor:.2g}x): a dead sensor, or no whisker "
                         "signal")  # fmt: skip
-        if not self.ranges:
+        if not self.ranges and self.rms_gain is None:
             return None
         for k, c in enumerate(chans):
             where = "" if len(chans) == 1 else f"channel {k}: "
             lo, hi = self.level[k]
-            rms_lo, rms_hi = 10.0 ** self.log_rms[k]
+            rms_lo, rms_hi = 10.0 ** self.log_rms[k] * (self.rms_gain or 1.0)
             margin = LEVEL_MARGIN * ((hi - lo) + rms_hi)
             med = float(np.median(c))
-            if not lo - margin <= med <= hi + margin:
+            if self.ranges and not lo - margin <= med <= hi + margin:
                 return (f"{where}level {med:.4g} far outside training's {lo:.4g}..{hi:.4g} "
                         "(another sensor, gain or unit?)")  # fmt: skip
             rms = 10.0 ** d[k, 0]
-            if not rms_lo / RMS_MARGIN <= rms <= rms_hi * RMS_MARGIN:
+            if (self.ranges or self.rms_gain) and not (rms_lo / RMS_MARGIN <= rms
+                                                       <= rms_hi * RMS_MARGIN):  # fmt: skip
                 return (f"{where}amplitude {rms:.3g} RMS, more than {RMS_MARGIN:g}x outside "
                         f"training's {rms_lo:.3g}..{rms_hi:.3g} (another sensor, gain or "
                         "unit?)")  # fmt: skip
@@ -224,16 +228,17 @@ class HealthReference:
             "mode_noise_caught": self.mode_noise_caught,
         }
 
-    def for_whisker(self) -> "HealthReference":
-        """This reference for windows of another calibrated whisker: the noise check alone,
-        which holds for any whisker.
+    def for_whisker(self, gain: float | None = None) -> "HealthReference":
+        """This reference for windows of another calibrated whisker: the noise check, which
+        holds for any whisker, and with ``gain`` (that whisker's response over the training
+        whisker's, :func:`gain_ratio`) the amplitude range scaled by it.
 
-        The level and amplitude ranges are the training whisker's (another has its own
-        offset and gain), and so is the mode threshold: a stiffer whisker responds less
-        (deflection per base acceleration ∝ 1/f1²), and at f1 × 1.3 the simulated set's
-        slow runs over soft ground put 4 % of clean windows below it at that whisker's mode
+        The level range is the training whisker's (another has its own offset), and so is
+        the mode threshold: a stiffer whisker responds less (deflection per base
+        acceleration ∝ 1/f1²), and at f1 × 1.3 the simulated set's slow runs over soft
+        ground put 4 % of clean windows below it at that whisker's mode
         (``benchmarks/window_health.py``)."""
-        return replace(self, mode_floor=None, ranges=False)
+        return replace(self, mode_floor=None, ranges=False, rms_gain=gain)
 
     @classmethod
     def from_dict(cls, d: dict) -> "HealthReference":

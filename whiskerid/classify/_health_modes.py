@@ -135,3 +135,14 @@ def whisker_mode(whisker, rate_hz: float, window: int) -> float:
     freqs = np.fft.rfftfreq(2 * int(window), 1.0 / rate_hz)[1:]
     t = np.abs(np.asarray(whisker.transfer(freqs, rate_hz))[:, 0, 0])
     return float(freqs[int(np.argmax(t))])
+
+
+def gain_ratio(other, own, rate_hz: float, window: int) -> float:
+    """How much larger ``other``'s windows are than ``own``'s for the same ground: the
+    ratio of the RMS of their sampled transfer functions (first sensor, amplifiers
+    included) over the bins the features use, a flat base spectrum assumed (the amplitude
+    range it scales is wide: :data:`whiskerid.classify._health.RMS_MARGIN`)."""
+    freqs = np.fft.rfftfreq(2 * int(window), 1.0 / rate_hz)[1:]
+    t_other = np.abs(np.asarray(other.transfer(freqs, rate_hz))[:, 0, 0])
+    t_own = np.abs(np.asarray(own.transfer(freqs, rate_hz))[:, 0, 0])
+    return float(np.sqrt(np.sum(t_other**2) / np.sum(t_own**2)))
