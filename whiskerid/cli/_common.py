@@ -352,9 +352,8 @@ class InterruptPolicy:
         (self._hook or sys.__unraisablehook__)(unraisable)
 
     def _again(self) -> None:
-        """The signal once more, from another thread a moment later: raised in the hook (or
-        the callback), it would be swallowed again; the main thread takes it at its next
-        point outside (and should that be another callback, the hook comes here again)."""
+        """The signal again, from another thread a moment later (raised in the hook it would
+        be swallowed again): the main thread takes it at its next point outside a callback."""
         import _thread
         import threading
 
@@ -368,9 +367,8 @@ class InterruptPolicy:
         timer.start()
 
     def lost(self) -> bool:
-        """Whether a signal arrived that the command did not stop on (swallowed where it
-        could not propagate, or it came as the command ended): the command must still
-        exit 128 + the signal."""
+        """Whether a signal came that the command did not stop on (swallowed where it could
+        not propagate, or as the command ended): it must still exit 128 + the signal."""
         return self.signum is not None and not self.stopping
 
     def stop_requested(self) -> bool:
@@ -417,8 +415,7 @@ _POLICY = InterruptPolicy()
 
 
 def _exit_now(status: int) -> None:
-    """End the process at once (a second signal during teardown), stderr flushed if it can
-    be."""
+    """End the process at once (a second signal in the teardown), stderr flushed if it can."""
     try:
         sys.stderr.flush()
     except BaseException:  # a flush interrupted mid-write: the process ends regardless
