@@ -9,6 +9,7 @@ from whiskerid.hw import OnlineClassifier
 import whiskerid as wi
 from whiskerid.classify import HealthReference, TrainConfig, load_dataset, window_health
 from whiskerid.classify._health import descriptors, sensor_fault, white_flatness
+from whiskerid.classify._health_modes import mode_prominence
 
 RATE = 200.0
 LEVEL = 13200  # ADC codes of 1.65 V at ±4.096 V full scale: a Hall sensor at rest
@@ -30,9 +31,9 @@ def _recording(x, **meta) -> wi.Recording:
 
 
 @pytest.fixture(scope="module")
-def model(tmp_path_factory):
-    """A model of two 'terrains' (the resonance driven softly or hard, with a second mode)
-    from 5 recordings each of 10 s."""
+def train_set(tmp_path_factory):
+    """Two 'terrains' (the resonance driven softly or hard, with a second mode), 5
+    recordings each of 10 s."""
     root = tmp_path_factory.mktemp("health")
     rng = np.random.default_rng(0)
     for label, drive in (("soft", 4.0), ("hard", 20.0)):
@@ -41,8 +42,12 @@ def model(tmp_path_factory):
             if label == "hard":
                 x += np.round(_whisker(rng, 2000, 70.0, drive / 2) - LEVEL)
             wi.write_csv(root / label / f"{label}{r}.csv", _recording(x))
-    ws = load_dataset(root)
-    return wi.train_classifier(ws, config=FAST)
+    return load_dataset(root)
+
+
+@pytest.fixture(scope="module")
+def model(train_set):
+    return wi.train_classifier(train_set, config=FAST)
 
 
 @pytest.mark.parametrize(
@@ -146,3 +151,72 @@ def test_training_on_noise_like_windows_turns_the_noise_check_off():
     ref = HealthReference.fit(w, np.repeat([0, 1], 100))
     assert ref.noise_flatness is None and ref.out_of_range(rng.standard_normal(200)) is None
     assert "amplitude" in ref.out_of_range(1e4 * rng.standard_normal(200))
+
+
+def _coloured(rng, n: int, corner_hz: float, rms: float) -> np.ndarray:
+    """Electrical noise through a first-order low-pass: not flat in spectrum, yet with
+    nothing standing out anywhere (what a dead input behind a filter gives)."""
+    a = np.exp(-2 * np.pi * corner_hz / RATE)
+    y = lfilter([1 - a], [1.0, -a], rng.standard_normal(n + 200))[200:]
+    return np.round(LEVEL + rms * y / y.std())
+
+
+def test_the_mode_check_finds_the_training_resonance_and_rejects_what_lacks_it(model, train_set):
+    """The reference's modes are the training windows' resonances (five whiskers of 35 to
+    47 Hz here: one or two modes in that span); white noise reaches the threshold in about
+    0.1 % of windows."""
+    ref = model.health
+    assert ref.rate_hz == RATE and 1 <= len(ref.modes_hz) <= 2
+    assert all(33 <= f <= 49 for f in ref.modes_hz) and ref.mode_floor is not None
+    rng = np.random.default_rng(21)
+    noise = rng.standard_normal((4000, 200))
+    caught = mode_prominence(noise, RATE, ref.modes_hz).max(axis=1) < ref.mode_floor
+    # At most one in a thousand passes (the threshold is lowered only as far as the
+    # training windows' weakest need, while it still catches 90 %)
+    assert ref.mode_noise_caught >= 0.9 and caught.mean() == pytest.approx(
+        ref.mode_noise_caught, abs=0.01
+    )
+    assert (
+        np.mean(mode_prominence(train_set.windows, RATE, ref.modes_hz).max(axis=1) < ref.mode_floor)
+        <= 0.005
+    )
+    # Coloured noise at the level and amplitude of the training windows: not flat (the
+    # noise check passes much of it), and no whisker near the mode (measured: 97 % and
+    # 98 % of windows refused, 97 % and 52 % by the mode check).
+    for corner in (5.0, 20.0):
+        why = [model.window_health(_coloured(rng, 200, corner, 10.0)) for _ in range(300)]
+        assert np.mean([w is not None and w[0] == "unknown" for w in why]) >= 0.93, corner
+        assert any(w is not None and "no whisker response" in w[1] for w in why)
+    # One recording of it: its windows get no terrain but for a few at most.
+    res = model.classify_recording(_recording(_coloured(rng, 2000, 5.0, 10.0)))
+    assert res["fault_windows"] >= 8 and "no whisker response" in " ".join(
+        w.get("reason", "") for w in res["windows"]
+    )
+
+
+def test_a_mode_threshold_is_kept_and_checked_in_the_model_file(model, tmp_path):
+    back = wi.ClassifierModel.load(model.save(tmp_path / "m"))
+    assert back.health.modes_hz == model.health.modes_hz
+    assert back.health.mode_floor == model.health.mode_floor
+    head = (tmp_path / "m" / "model.json").read_text()
+    (tmp_path / "m" / "model.json").write_text(head.replace('"modes_hz": [', '"modes_hz": [150, '))
+    with pytest.raises(wi.ModelError, match="corrupt health reference"):
+        wi.ClassifierModel.load(tmp_path / "m")
+
+
+def test_on_another_whisker_only_the_noise_check_applies():
+    """Another whisker has its own offset, gain and mode: a louder, shifted resonance is not
+    refused, electrical noise still is, and an amplitude far beyond that whisker's gain."""
+    rng = np.random.default_rng(8)
+    train = np.stack([_whisker(rng, 200, 40.0, 4.0) for _ in range(300)])
+    ref = HealthReference.fit(train, rate_hz=RATE, modes_hz=(40.0,))
+    assert ref.mode_floor is not None and ref.train_rejection <= 0.01
+    other = ref.for_whisker()
+    louder = 5 * (_whisker(rng, 200, 25.0, 4.0) - LEVEL) + 3 * LEVEL  # another gain, offset
+    assert ref.out_of_range(louder) is not None and other.out_of_range(louder) is None
+    assert "noise-like" in other.out_of_range(LEVEL + 8 * rng.standard_normal(200))
+    # With that whisker's gain (5 here), its amplitude range: the louder whisker passes,
+    # a thousand times more is refused.
+    scaled = ref.for_whisker(5.0)
+    assert scaled.out_of_range(louder) is None
+    assert "amplitude" in scaled.out_of_range(1000 * (louder - 3 * LEVEL))

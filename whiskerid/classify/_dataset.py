@@ -458,13 +458,23 @@ def recorded_amplifier(metas: list[dict], default: float = 1.0) -> float:
     return values.pop() if values else default
 
 
+#: Fastest plausible robot speed (m/s), as the stream's (``whiskerid.hw``): a ground robot
+#: carrying a whisker moves at up to a few metres per second; more is a unit error (mm/s,
+#: km/h) or a corrupt value, and would only change the labels.
+MAX_SPEED_MPS = 5.0
+
+
 def check_speed(speed) -> None:
-    """Refuse speeds that are not positive and finite (m/s): the speed-normalised features
-    divide by them."""
+    """Refuse speeds that are not positive, finite and plausible (m/s, at most
+    :data:`MAX_SPEED_MPS`): the speed-normalised features divide by them."""
     v = np.asarray(speed, dtype=float)
-    if not (np.isfinite(v).all() and (v > 0).all()):
-        bad = v[~(np.isfinite(v) & (v > 0))].ravel()[0]
-        raise ValueError(f"speed {bad:g} m/s: the robot speed must be a positive number")
+    ok = np.isfinite(v) & (v > 0) & (v <= MAX_SPEED_MPS)
+    if not ok.all():
+        bad = v[~ok].ravel()[0]
+        raise ValueError(
+            f"speed {bad:g} m/s: the robot speed must be a positive number of metres per "
+            f"second, at most {MAX_SPEED_MPS:g} (a larger one is a unit error: mm/s, km/h?)"
+        )
 
 
 def recording_speed(rec: Recording) -> float:
@@ -479,9 +489,9 @@ def recording_speed(rec: Recording) -> float:
         v = float(rec.meta["speed_mps"])
     except ValueError:
         v = float("nan")
-    if not (np.isfinite(v) and v > 0):
+    if not (np.isfinite(v) and 0 < v <= MAX_SPEED_MPS):
         raise RecordingError(
             f"{rec.source or 'recording'}: speed_mps {rec.meta['speed_mps']!r} is not a "
-            "positive number of metres per second"
+            f"positive number of metres per second up to {MAX_SPEED_MPS:g} (a unit error?)"
         )
     return v

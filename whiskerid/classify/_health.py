@@ -14,7 +14,9 @@ window is therefore checked first, offline (``classify``) and online (``stream``
   shape lies far from every window the model was trained on (:class:`HealthReference`,
   kept in the model file). A whisker dragged over ground rings at its modes, so its
   spectrum is shaped by them; electrical noise alone has a flat spectrum at a level set by
-  the electronics, not the ground.
+  the electronics, not the ground. Nor does noise show a **response near the whisker's
+  mode** (its calibrated f1, or the training windows' resonance): the mode check of
+  :mod:`whiskerid.classify._health_modes`.
 
 Noise-likeness is measured by the spectral flatness (geometric over arithmetic mean of the
 periodogram of the Hann-tapered window, mean removed): 1 for a flat spectrum, about
@@ -34,6 +36,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ._health_modes import mode_prominence, training_modes, white_detection, white_prominence
+
 SENSOR_FAULT = "sensor-fault"
 UNKNOWN = "unknown"
 
@@ -44,6 +48,10 @@ NOISE_QUANTILE = 0.001
 #: Noise-like training windows beyond this share: the model was trained on windows that
 #: look like noise, so it cannot call noise unknown (the noise check is left off).
 NOISE_TRAIN_LIMIT = 0.01
+#: The mode threshold is at most the prominence this share of training windows stay below.
+MODE_TRAIN_QUANTILE = 0.005
+#: The mode check is kept only while its threshold catches this share of white noise.
+MIN_NOISE_CAUGHT = 0.9
 #: An amplitude (RMS) more than this factor beyond every training window's is far outside
 #: training: wide, since a new recording may be quieter or rougher than any trained on.
 RMS_MARGIN = 10.0
@@ -111,17 +119,40 @@ class HealthReference:
             noise-like (:func:`white_flatness`); None when the training windows were
             themselves noise-like too often (:data:`NOISE_TRAIN_LIMIT`).
         train_rejection: Share of the training windows these checks reject.
+        rate_hz: Sample rate of the windows (Hz), for the mode check; None: no mode check.
+        modes_hz: Where the whisker's response stands out (Hz, below Nyquist): the
+            calibrated whisker's mode, or the training windows' resonance
+            (:mod:`whiskerid.classify._health_modes`).
+        mode_floor: Mode prominence (log10) a window must reach in some channel: white
+            noise's 99.9 % quantile (:func:`white_prominence`), or the training windows'
+            :data:`MODE_TRAIN_QUANTILE` quantile where lower; None when the check is off
+            (no rate, or a threshold that catches less than :data:`MIN_NOISE_CAUGHT` of
+            white noise).
+        mode_noise_caught: Share of white-noise windows below ``mode_floor``.
+        rms_gain: On another whisker, the factor its response puts on the amplitude range
+            (the range then applies without ``ranges``); None: no such scaling.
+        ranges: Whether the level and amplitude ranges apply (not on another whisker,
+            whose offset and gain differ: :meth:`for_whisker`).
     """
 
     level: np.ndarray
     log_rms: np.ndarray
     noise_flatness: float | None = None
     train_rejection: float = 0.0
+    rate_hz: float | None = None
+    modes_hz: tuple[float, ...] = ()
+    mode_floor: float | None = None
+    ranges: bool = True
+    mode_noise_caught: float | None = None
+    rms_gain: float | None = None
 
     @classmethod
-    def fit(cls, windows, labels=None) -> "HealthReference":
+    def fit(cls, windows, labels=None, *, rate_hz: float | None = None,
+            modes_hz=None) -> "HealthReference":  # fmt: skip
         """The reference of training windows ``(n, [channels,] window)``; sensor-fault
-        windows among them are left out. ``labels`` is accepted for symmetry and unused."""
+        windows among them are left out. ``labels`` is accepted for symmetry and unused.
+        With ``rate_hz``, the mode check is set up at ``modes_hz`` (the calibrated
+        whisker's; by default the training windows' own resonance, :func:`training_modes`)."""
         w = np.asarray(windows, dtype=float)
         w = w[np.array([sensor_fault(x) is None for x in w])]
         chans = w if w.ndim == 3 else w[:, None, :]
@@ -132,6 +163,18 @@ class HealthReference:
         ref = cls(np.stack([level.min(0), level.max(0)], axis=1),
                   np.stack([d[..., 0].min(0), d[..., 0].max(0)], axis=1),
                   noise if np.mean(noisy) <= NOISE_TRAIN_LIMIT else None)  # fmt: skip
+        if rate_hz is not None:
+            modes = tuple(float(f) for f in (modes_hz or training_modes(w, rate_hz)))
+            prom = np.max(mode_prominence(w, rate_hz, modes), axis=1)
+            # White noise's 99.9 % quantile, lowered where the training windows' own
+            # weakest reach below it (slow runs over soft ground excite the mode little):
+            # kept while it still catches most white noise.
+            floor = min(white_prominence(w.shape[-1], float(rate_hz), modes),
+                        float(np.quantile(prom, MODE_TRAIN_QUANTILE, method="lower")))  # fmt: skip
+            caught = white_detection(w.shape[-1], float(rate_hz), modes, floor)
+            ref = replace(ref, rate_hz=float(rate_hz), modes_hz=modes,
+                          mode_floor=floor if caught >= MIN_NOISE_CAUGHT else None,
+                          mode_noise_caught=caught)  # fmt: skip
         rejected = np.mean([ref.out_of_range(x) is not None for x in w])
         return replace(ref, train_rejection=float(rejected))
 
@@ -145,17 +188,28 @@ class HealthReference:
                     f"noise's (>= {10**self.noise_flatness:.2f}; the training windows' "
                     "resonances stay below): a dead sensor's electrical noise, or no whisker "
                     "signal")  # fmt: skip
+        if self.mode_floor is not None:
+            prom = mode_prominence(chans[None], self.rate_hz, self.modes_hz)[0]
+            if np.all(prom < self.mode_floor):
+                modes = ", ".join(f"{f:.1f}" for f in self.modes_hz)
+                return (f"no whisker response: nothing stands out near its mode ({modes} Hz; "
+                        f"{10 ** prom.max():.2g}x the local floor, white noise reaches "
+                        f"{10**self.mode_floor:.2g}x): a dead sensor, or no whisker "
+                        "signal")  # fmt: skip
+        if not self.ranges and self.rms_gain is None:
+            return None
         for k, c in enumerate(chans):
             where = "" if len(chans) == 1 else f"channel {k}: "
             lo, hi = self.level[k]
-            rms_lo, rms_hi = 10.0 ** self.log_rms[k]
+            rms_lo, rms_hi = 10.0 ** self.log_rms[k] * (self.rms_gain or 1.0)
             margin = LEVEL_MARGIN * ((hi - lo) + rms_hi)
             med = float(np.median(c))
-            if not lo - margin <= med <= hi + margin:
+            if self.ranges and not lo - margin <= med <= hi + margin:
                 return (f"{where}level {med:.4g} far outside training's {lo:.4g}..{hi:.4g} "
                         "(another sensor, gain or unit?)")  # fmt: skip
             rms = 10.0 ** d[k, 0]
-            if not rms_lo / RMS_MARGIN <= rms <= rms_hi * RMS_MARGIN:
+            if (self.ranges or self.rms_gain) and not (rms_lo / RMS_MARGIN <= rms
+                                                       <= rms_hi * RMS_MARGIN):  # fmt: skip
                 return (f"{where}amplitude {rms:.3g} RMS, more than {RMS_MARGIN:g}x outside "
                         f"training's {rms_lo:.3g}..{rms_hi:.3g} (another sensor, gain or "
                         "unit?)")  # fmt: skip
@@ -168,15 +222,40 @@ class HealthReference:
             "log_rms": self.log_rms.tolist(),
             "noise_flatness": self.noise_flatness,
             "train_rejection": self.train_rejection,
+            "rate_hz": self.rate_hz,
+            "modes_hz": list(self.modes_hz),
+            "mode_floor": self.mode_floor,
+            "mode_noise_caught": self.mode_noise_caught,
         }
+
+    def for_whisker(self, gain: float | None = None) -> "HealthReference":
+        """This reference for windows of another calibrated whisker: the noise check, which
+        holds for any whisker, and with ``gain`` (that whisker's response over the training
+        whisker's, :func:`gain_ratio`) the amplitude range scaled by it.
+
+        The level range is the training whisker's (another has its own offset), and so is
+        the mode threshold: a stiffer whisker responds less (deflection per base
+        acceleration ∝ 1/f1²), and at f1 × 1.3 the simulated set's slow runs over soft
+        ground put 4 % of clean windows below it at that whisker's mode
+        (``benchmarks/window_health.py``)."""
+        return replace(self, mode_floor=None, ranges=False, rms_gain=gain)
 
     @classmethod
     def from_dict(cls, d: dict) -> "HealthReference":
         """Read :meth:`to_dict`'s form; raises ValueError/KeyError/TypeError when corrupt."""
-        noise = d.get("noise_flatness")
+        noise, rate, floor = d.get("noise_flatness"), d.get("rate_hz"), d.get("mode_floor")
         ref = cls(np.asarray(d["level"], float), np.asarray(d["log_rms"], float),
                   None if noise is None else float(noise),
-                  float(d.get("train_rejection", 0.0)))  # fmt: skip
+                  float(d.get("train_rejection", 0.0)),
+                  None if rate is None else float(rate),
+                  tuple(float(f) for f in d.get("modes_hz", ())),
+                  None if floor is None else float(floor))  # fmt: skip
+        if (caught := d.get("mode_noise_caught")) is not None:
+            ref = replace(ref, mode_noise_caught=float(caught))
+        if ref.mode_floor is not None and not (ref.rate_hz and ref.modes_hz):
+            raise ValueError("a mode threshold without its rate or modes")
+        if not all(0 < f < (ref.rate_hz or np.inf) / 2 for f in ref.modes_hz):
+            raise ValueError(f"modes {ref.modes_hz} outside 0..Nyquist")
         if ref.level.ndim != 2 or ref.level.shape != ref.log_rms.shape or ref.level.shape[1] != 2:
             raise ValueError("inconsistent health reference shapes")
         if not (np.isfinite(ref.level).all() and np.isfinite(ref.log_rms).all()):

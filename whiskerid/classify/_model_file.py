@@ -49,6 +49,7 @@ from ._features import (
     window_fit_features,
 )
 from ._health import HealthReference, window_health
+from ._health_modes import gain_ratio
 from ._mlp import (
     MLP,
     from_arrays,
@@ -122,6 +123,7 @@ class ClassifierModel:
         self.context_s = self.window_s if context_s is None else context_s
         self.whisker = whisker
         self.recorded_with = whisker
+        self._other_health = None
         if spec.deconvolve and whisker is None:
             raise ValueError("a model with whisker-aware features needs its training whisker")
         # Device-resident arguments of the module-level compiled functions, which depend on
@@ -137,11 +139,16 @@ class ClassifierModel:
         (:func:`whiskerid.classify.window_health`).
 
         The training data's reference applies while the model reads its own whisker's
-        recordings; on another whisker (:meth:`use_whisker`) whose resonance shapes the
-        spectrum differently, only the sensor-fault checks do.
+        recordings; on another whisker (:meth:`use_whisker`), with its own offset, gain and
+        modes, the noise check and the amplitude range scaled by its gain do
+        (:meth:`HealthReference.for_whisker`).
         """
-        own = self.recorded_with is self.whisker
-        return window_health(samples, self.health if own else None)
+        if self.health is None or self.recorded_with is self.whisker:
+            return window_health(samples, self.health)
+        if self._other_health is None:
+            gain = gain_ratio(self.recorded_with, self.whisker, self.rate_hz, self.window)
+            self._other_health = self.health.for_whisker(gain)
+        return window_health(samples, self._other_health)
 
     @property
     def needs_whisker(self) -> bool:
@@ -158,6 +165,7 @@ class ClassifierModel:
             )
         whisker = WhiskerResponse(whisker.record, whisker.amplifier, self.spec.channels)
         self.recorded_with = whisker
+        self._other_health = None  # its health reference, made when first asked
         self._args = (self.spec.numbers(whisker, self.whisker), *self._args[1:])
         self._exported = None
 

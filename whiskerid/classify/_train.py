@@ -9,6 +9,7 @@ from ._context import check_context, default_context_s
 from ._dataset import WindowSet
 from ._features import FeatureSpec, compute_features, rerecorded
 from ._health import HealthReference
+from ._health_modes import whisker_mode
 from ._mlp import TrainConfig, default_config, train_mlp
 from ._model_file import ClassifierModel, recording_hashes
 from ._split import grouped_split
@@ -243,7 +244,8 @@ def train_classifier(
     model.info["span_whiskers"] = count
     # What the training windows look like, so that a window unlike them all (a dead
     # sensor's noise, another instrument) is 'unknown' rather than some terrain.
-    model.health = HealthReference.fit(ws.windows, ws.labels)
+    modes = None if whisker is None else (whisker_mode(whisker, ws.rate_hz, spec.window),)
+    model.health = HealthReference.fit(ws.windows, ws.labels, rate_hz=ws.rate_hz, modes_hz=modes)
     model.info["recordings_sha256"] = recording_hashes(ws.sources)
     model.channel = ws.channel if channel is None else channel
     if hop is not None:

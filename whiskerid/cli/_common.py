@@ -6,6 +6,7 @@ Imports nothing from the library at module level: the parser is built from these
 
 import argparse
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -271,14 +272,29 @@ class InterruptPolicy:
     By default a signal raises :class:`Interrupted` at once. Inside :meth:`deferred`, the
     first signal only sets :attr:`requested` (the code polls :meth:`stop_requested` at a safe
     point, such as between two MCMC steps, and stops there); a second one raises at once.
+
+    A signal can land inside a callback whose exceptions Python only reports ("Exception
+    ignored in ...": JAX's garbage-collection callback, a ``__del__``): the
+    :data:`sys.unraisablehook` installed here notices the swallowed interrupt and raises it
+    again at the next point where it can propagate. Whatever happens, :attr:`signum` stays
+    set, and the command's caller checks it before it exits (:meth:`lost`).
+
+    With ``keep`` (the command line's own process), the handlers stay after the command has
+    stopped on a signal, until the process exits: a later signal then ends the process at
+    once with the same status (128 + the first signal), never by the default action.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, *, keep: bool = False) -> None:
         self.signum: int | None = None
         self.requested = False
         self.stopping = False  # set once the command has caught its interrupt
+        self.keep = keep
+        self.exit_status: int | None = None  # once the command has stopped on a signal
         self._defer = False
         self._previous: dict = {}
+        self._hook = None
+        self._in_hook = False  # in the unraisable hook: a signal is passed on, not raised
+        self._pending = False  # a swallowed signal is to be raised again
 
     def __enter__(self) -> "InterruptPolicy":
         import signal
@@ -287,28 +303,73 @@ class InterruptPolicy:
         if threading.current_thread() is threading.main_thread():
             for sig in (signal.SIGINT, signal.SIGTERM):
                 self._previous[sig] = signal.signal(sig, self._handle)
+            self._hook = sys.unraisablehook
+            sys.unraisablehook = self._unraisable
         return self
 
     def __exit__(self, *exc) -> None:
         import signal
 
+        if self.keep and (self.stopping or self.signum is not None):
+            self.stopping = True  # the handlers stay, until the process exits
+            return
         for sig, handler in self._previous.items():
             signal.signal(sig, handler)
         self._previous = {}
+        if self._hook is not None:
+            sys.unraisablehook, self._hook = self._hook, None
 
     def _handle(self, signum, frame) -> None:
         if self.stopping:
             # The command has stopped: it is saying what it kept and tearing down. A signal
-            # raised there would land in native code being torn down (a crash), so it is
-            # ignored.
+            # raised there would land in native code being torn down (a crash): the process
+            # ends now, with the first signal's status.
+            if self.keep:
+                _exit_now(self.exit_status or 128 + int(signum))
+            return
+        if self._in_hook:  # inside the unraisable hook: raised here, it would be lost
+            self._again()
             return
         first = self.signum is None
         self.signum = signum
+        self._pending = False
         if self._defer and first:
             self.requested = True
             say("stopping after the current step (send the signal again to stop at once)")
             return
         raise Interrupted(signum)
+
+    def _unraisable(self, unraisable) -> None:
+        """An exception Python could not propagate: a swallowed interrupt is raised again."""
+        if isinstance(unraisable.exc_value, KeyboardInterrupt) and self.signum is not None:
+            if not self.stopping:
+                self._in_hook = True
+                try:
+                    self._again()
+                finally:
+                    self._in_hook = False
+            return
+        (self._hook or sys.__unraisablehook__)(unraisable)
+
+    def _again(self) -> None:
+        """The signal again, from another thread a moment later (raised in the hook it would
+        be swallowed again): the main thread takes it at its next point outside a callback."""
+        import _thread
+        import threading
+
+        def trip():
+            if self._pending and not self.stopping:
+                _thread.interrupt_main(self.signum)
+
+        self._pending = True
+        timer = threading.Timer(0.01, trip)
+        timer.daemon = True
+        timer.start()
+
+    def lost(self) -> bool:
+        """Whether a signal came that the command did not stop on (swallowed where it could
+        not propagate, or as the command ended): it must still exit 128 + the signal."""
+        return self.signum is not None and not self.stopping
 
     def stop_requested(self) -> bool:
         """Whether a signal asked to stop (polled by code that stops at safe points)."""
@@ -333,7 +394,8 @@ class InterruptPolicy:
         import signal
 
         signum = getattr(err, "signum", None) or self.signum or signal.SIGINT
-        return 128 + int(signum)
+        self.exit_status = 128 + int(signum)
+        return self.exit_status
 
     def report(self, err: BaseException) -> str:
         """One line: which signal, and what was kept (or that nothing was written)."""
@@ -352,14 +414,24 @@ class InterruptPolicy:
 _POLICY = InterruptPolicy()
 
 
-def start_command() -> InterruptPolicy:
-    """A fresh interrupt policy and output watch for a command about to run."""
+def _exit_now(status: int) -> None:
+    """End the process at once (a second signal in the teardown), stderr flushed if it can."""
+    try:
+        sys.stderr.flush()
+    except BaseException:  # a flush interrupted mid-write: the process ends regardless
+        pass
+    os._exit(status)
+
+
+def start_command(*, keep: bool = False) -> InterruptPolicy:
+    """A fresh interrupt policy and output watch for a command about to run (``keep``: the
+    process ends with the command, see :class:`InterruptPolicy`)."""
     global _POLICY
     from ..io import clear_expected
 
     WATCH.reset()
     clear_expected()
-    _POLICY = InterruptPolicy()
+    _POLICY = InterruptPolicy(keep=keep)
     return _POLICY
 
 

@@ -10,6 +10,7 @@ answers without starting JAX: the run functions import what they use.
 """
 
 import argparse
+import gc
 import json
 import os
 import signal
@@ -34,7 +35,9 @@ from . import (
 from ._cache import enable_compile_cache
 from ._common import (
     CommandError,
+    Interrupted,
     add_quiet_everywhere,
+    interrupts,
     json_safe,
     one_line,
     show_progress,
@@ -123,7 +126,13 @@ def main(argv: list[str] | None = None) -> int:
     enable_compile_cache()
     start = time.perf_counter()
     try:
-        return _run(args, start, fast_exit=argv is None)
+        status = _run(args, start, fast_exit=argv is None)
+        if argv is None and interrupts().exit_status is not None:
+            # Stopped on a signal, its outputs closed and the line said: the interpreter's
+            # teardown (JAX's, XLA's) is where a crash or another signal would land.
+            gc.collect()  # files a traceback kept open are closed (and flushed) first
+            _exit_now(status)
+        return status
     except BrokenPipeError:
         # The reader left (``| head``): what it read is all it wanted. No traceback, and
         # nothing more written to the closed pipe at exit.
@@ -142,18 +151,25 @@ def _run(args, start: float, *, fast_exit: bool) -> int:
     ticker = start_progress(
         f"whiskerid {name}", show=show_progress(args) and name not in _OWN_PROGRESS
     )
-    with start_command() as policy:
+    with start_command(keep=fast_exit) as policy:
         try:
             with ticker:
                 result = args.func(args)
         except _EXPECTED as err:
+            if policy.signum is not None:  # the interrupt, wrapped (a JAX host callback's)
+                return _interrupted(args, policy, Interrupted(policy.signum))
             print(f"whiskerid {args.command}: error: {one_line(err)}", file=sys.stderr)
             return 2
         except KeyboardInterrupt as err:
-            policy.stopping = True  # from here on a signal would land in the teardown
-            # One line, no traceback: what was kept, or that nothing was written.
-            print(f"whiskerid {args.command}: {policy.report(err)}", file=sys.stderr)
-            return policy.status(err)
+            return _interrupted(args, policy, err)
+        except Exception:
+            if policy.signum is None:
+                raise
+            # A signal came, and the command failed after it (the interrupt swallowed by a
+            # library that then went on with what it had): the signal's status, no traceback.
+            return _interrupted(args, policy, Interrupted(policy.signum))
+        if policy.lost():  # swallowed where it landed, or it came as the command ended
+            return _interrupted(args, policy, Interrupted(policy.signum))
         if getattr(args, "json", False):
             result = {
                 "command": args.command,
@@ -165,6 +181,15 @@ def _run(args, start: float, *, fast_exit: bool) -> int:
     if fast_exit and name in _FAST_EXIT:
         _exit_now(0)
     return 0
+
+
+def _interrupted(args, policy, err: BaseException) -> int:
+    """Say in one line, no traceback, what was kept (or that nothing was written); the exit
+    status for the signal."""
+    policy.stopping = True  # from here on a signal would land in the teardown
+    status = policy.status(err)  # before the line: a signal after it exits with this status
+    print(f"whiskerid {args.command}: {policy.report(err)}", file=sys.stderr)
+    return status
 
 
 def _exit_now(status: int) -> None:

@@ -147,11 +147,13 @@ def _checked_backend(emcee):
     class CheckedHDFBackend(emcee.backends.HDFBackend):
         def _check_space(self) -> None:
             folder = Path(self.filename).resolve().parent
-            free = shutil.disk_usage(folder).free
+            disk = shutil.disk_usage(folder).free
+            free = min(disk, _size_limit_room(self.filename))
             if free < CHAIN_FREE_BYTES:
+                where = "on its disk" if free == disk else "under the file-size limit (ulimit -f)"
                 raise OSError(
-                    errno.ENOSPC,
-                    f"{free / 1e6:.3g} MB left on its disk: stopped before writing step "
+                    errno.ENOSPC if free == disk else errno.EFBIG,
+                    f"{free / 1e6:.3g} MB left {where}: stopped before writing step "
                     f"{self.iteration + 1}, the chain whole to there; free some space and "
                     "continue it with --resume",
                 )
@@ -165,6 +167,21 @@ def _checked_backend(emcee):
             super().save_step(state, accepted)
 
     return CheckedHDFBackend
+
+
+def _size_limit_room(path) -> float:
+    """Bytes the file at ``path`` may still grow by under the process's file-size limit
+    (``ulimit -f``; a write beyond it fails as a full disk's does): infinite without one."""
+    try:
+        import resource
+
+        limit = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+    except (ImportError, OSError, ValueError):  # no such limit on this system
+        return float("inf")
+    if limit == resource.RLIM_INFINITY:
+        return float("inf")
+    size = Path(path).stat().st_size if Path(path).exists() else 0
+    return float(limit - size)
 
 
 def sample_posterior(
