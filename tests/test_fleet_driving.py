@@ -3,8 +3,9 @@
 The fast tests drive a whisker written here with numpy alone: a single mode's response
 (FFT filtering by ``1/(ω₁² − ω² + 2iζω₁ω)``) to a coloured base acceleration whose spectrum
 every minute takes another slope and corner and another motor tone, plus white sensor noise.
-(A base spectrum with nulls near f1, as a wheel's contact patch makes at some speeds, is
-harder: the terrain simulator's drives in the slow test and the benchmark have them.)
+One of them (``road``) adds what a wheeled robot's base motion has on the scale of the
+resonance: the rear axle's echo of the front's profile and a contact patch's null near f1.
+The terrain simulator's drives are in the slow test and the benchmark.
 """
 
 import json
@@ -138,9 +139,9 @@ def test_cli_drive_logs_sessions_and_check_flags_a_three_percent_drop(tmp_path, 
 @pytest.mark.slow
 def test_ten_minutes_of_simulated_terrain_give_the_calibrated_values():
     """Mixed terrains and speeds from the terrain simulator (the exact modal model, the Hall
-    sensor, the ADS1115 at 200 Hz): the values within 3σ of the record's. (The goal of f1
-    within 1 % and ζ within 15 % held on 6 and 5 of the benchmark's 6 drives; this drive's
-    f1 is 1.65 % high, 1.0σ, a wheel-patch null near f1 in several of its runs.)"""
+    sensor, the ADS1115 at 200 Hz): the values within 3σ, f1 within 1 % and ζ within 15 % of
+    the record's. (A smooth base alone put this drive's f1 1.65 % high: a wheel-patch null near
+    f1 in several of its runs; with the patch and the axles' echo modelled, +0.6 %, ζ −13 %.)"""
     from whiskerid.model import paper_record
     from whiskerid.terrain import SPEEDS_MPS, TERRAINS, RunSpec, synthesize_runs
 
@@ -154,4 +155,4 @@ def test_ten_minutes_of_simulated_terrain_give_the_calibrated_values():
     assert fit.status == "ok"
     zeta = float(record.zeta)
     assert abs(fit.f1_hz - f1) < 3 * fit.f1_std and abs(fit.zeta - zeta) < 3 * fit.zeta_std
-    assert abs(fit.f1_hz / f1 - 1) < 0.02 and abs(fit.zeta / zeta - 1) < 0.25
+    assert abs(fit.f1_hz / f1 - 1) < 0.01 and abs(fit.zeta / zeta - 1) < 0.15
