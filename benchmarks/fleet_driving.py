@@ -26,13 +26,16 @@ with f1 3 % lower (``--drop``) from drive ``--first`` on; every drive is a sessi
 health log and :func:`whiskerid.fleet.check_fleet` reads them: the detection rate, the drives
 it took, and the false alarms per healthy whisker-session.
 
-Run: ``python benchmarks/fleet_driving.py [--drives 10 --independent 10 --detect 12]``.
+Run: ``python benchmarks/fleet_driving.py [--drives 10 --independent 10 --detect 10]``; the
+detection fleet can be split over processes (``--whiskers 0 1 2 --save-rows a.json`` in each,
+then ``--load-rows a.json b.json``).
 """
 
 import argparse
 import json
 import time
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
@@ -170,10 +173,16 @@ def detection(args, f1_start, zeta_start):
 
     rows, damaged = [], {}
     for w in range(args.detect):
-        rng = np.random.default_rng(9000 + w)
-        factor, zeta = rng.uniform(0.95, 1.03), rng.uniform(0.025, 0.06)
         if w % 2:
             damaged[f"w{w:02d}"] = args.first
+    for path in args.load_rows:  # the rows of earlier runs (several processes at once)
+        rows += json.loads(Path(path).read_text())
+    done = {r["whisker"] for r in rows}
+    for w in args.whiskers or range(args.detect):
+        if f"w{w:02d}" in done:
+            continue
+        rng = np.random.default_rng(9000 + w)
+        factor, zeta = rng.uniform(0.95, 1.03), rng.uniform(0.025, 0.06)
         for d in range(args.sessions):
             drop = 1 - args.drop if (w % 2 and d >= args.first) else 1.0
             seed = 10_000 + 100 * w + d
@@ -182,6 +191,8 @@ def detection(args, f1_start, zeta_start):
             row = health_row(f"w{w:02d}", f"drive-{d:02d}", fit, [])
             rows.append({**row, "source": "drive"})
         print(f"whisker {w + 1}/{args.detect} driven", flush=True)
+    if args.save_rows:
+        Path(args.save_rows).write_text(json.dumps(rows))
     result = check_fleet(rows)
     events = {e["whisker"]: e for e in result.events if e["parameter"] == "f1_hz"}
     flagged = {(f["whisker"], f["session"]) for f in result.flags}  # either parameter
@@ -221,6 +232,9 @@ def main() -> None:
     ap.add_argument("--sessions", type=int, default=6, help="drives per whisker (detection)")
     ap.add_argument("--first", type=int, default=3, help="first drive with the drop (0-based)")
     ap.add_argument("--drop", type=float, default=0.03, help="relative f1 drop (detection)")
+    ap.add_argument("--whiskers", type=int, nargs="*", help="only these whiskers (detection)")
+    ap.add_argument("--save-rows", help="write the detection fleet's health rows (JSON)")
+    ap.add_argument("--load-rows", nargs="*", default=[], help="rows of earlier runs (JSON)")
     args = ap.parse_args()
     paper = paper_record()
     f1_start = float(paper.whisker().natural_frequencies_hz[0])

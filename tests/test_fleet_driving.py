@@ -156,3 +156,20 @@ def test_ten_minutes_of_simulated_terrain_give_the_calibrated_values():
     zeta = float(record.zeta)
     assert abs(fit.f1_hz - f1) < 3 * fit.f1_std and abs(fit.zeta - zeta) < 3 * fit.zeta_std
     assert abs(fit.f1_hz / f1 - 1) < 0.01 and abs(fit.zeta / zeta - 1) < 0.15
+
+
+def test_a_block_far_from_the_others_is_an_outlier_in_the_health_log():
+    """A block a patch null pulled off stays out of the blocks' spread `fleet check` reads
+    (a plain standard deviation of the blocks would take it in)."""
+    from whiskerid.fleet import DriveFit, health_row
+
+    rng = np.random.default_rng(1)
+    blocks = [{"name": f"b{k}", "f1_hz": 45 * (1 + 0.003 * rng.standard_normal()),
+               "zeta": 0.04 * (1 + 0.05 * rng.standard_normal()), "status": "ok"}
+              for k in range(10)]  # fmt: skip
+    blocks[3]["f1_hz"] = 45 * 1.06
+    fit = DriveFit("ok", 45.0, 0.05, 0.04, 0.002, blocks, 600.0)
+    row = health_row("w1", "d1", fit, [])
+    status = row["pluck_status"].split(";")
+    assert status[3] == "outlier" and status.count("outlier") == 1
+    assert float(row["f1_pluck_sd"]) < 0.01 * 45

@@ -268,12 +268,33 @@ def identify_driving(
     return DriveFit("ok", f1, f1_std, z, z_std, blocks, seconds)
 
 
+#: A block further than this many robust σ (1.4826 MAD) from the drive's median f_1 or ln ζ
+#: is an outlier in the health log: kept out of the blocks' spread that ``fleet check`` reads
+#: (the drive's values are medians, which such a block hardly moves).
+OUTLIER_MADS = 3.5
+
+
+def _outliers(blocks) -> set[int]:
+    ok = [i for i, b in enumerate(blocks) if b["status"] == "ok"]
+    out: set[int] = set()
+    if len(ok) < 3:
+        return out
+    for key, fn in (("f1_hz", float), ("zeta", math.log)):
+        v = np.array([fn(blocks[i][key]) for i in ok])
+        med = float(np.median(v))
+        scale = 1.4826 * float(np.median(np.abs(v - med)))
+        out |= {i for i, x in zip(ok, v, strict=True) if abs(x - med) > OUTLIER_MADS * scale}
+    return out
+
+
 def health_row(whisker: str, session: str, fit: DriveFit, files: list[str]) -> dict:
-    """The health log's row of one drive (the fleet table's columns; blocks as plucks)."""
+    """The health log's row of one drive (the fleet table's columns; blocks as plucks; a
+    block far from the others, see :data:`OUTLIER_MADS`, marked ``outlier``)."""
     from ._table import COLUMNS
 
     row = {c: "" for c in COLUMNS}
-    ok = [b for b in fit.blocks if b["status"] == "ok"]
+    far = _outliers(fit.blocks)
+    ok = [b for i, b in enumerate(fit.blocks) if b["status"] == "ok" and i not in far]
     sd = lambda v: float(np.std(v, ddof=1)) if len(v) > 1 else math.nan  # noqa: E731
     row.update(
         whisker=whisker,
@@ -290,7 +311,10 @@ def health_row(whisker: str, session: str, fit: DriveFit, files: list[str]) -> d
         zeta_plucks=";".join(f"{b['zeta']:.10g}" for b in fit.blocks),
         f1_pluck_sd=f"{sd([b['f1_hz'] for b in ok]):.4g}",
         zeta_pluck_sd=f"{sd([b['zeta'] for b in ok]):.4g}",
-        pluck_status=";".join("ok" if b["status"] == "ok" else "outlier" for b in fit.blocks),
+        pluck_status=";".join(
+            "ok" if b["status"] == "ok" and i not in far else "outlier"
+            for i, b in enumerate(fit.blocks)
+        ),
         files=";".join(files),
         fitted_at=datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
     )
