@@ -21,6 +21,11 @@ recordings each) are laid out as two whiskers whose repeats are sessions (links 
 temporary folder) with the records ``fits/cantilever-aluminium-*.toml``, calibrated (one
 mode, acceleration in g) and checked: any flag there is a false alarm.
 
+Progress goes to stderr (the fleet's own bar, then the loop's sessions) and ends with one
+line that puts the fleet's time beside the loop's, wall and CPU (user + system: on a machine
+shared with other work the wall times of the two depend on the load at the time each ran,
+the CPU times far less), with the load averages; the JSON goes to stdout.
+
 Run: ``python benchmarks/fleet.py [--whiskers 100 --sessions 10 --plucks 3 --damaged 10]
 [--cantilever ../shared/data/cantilever]`` (prints JSON).
 """
@@ -72,13 +77,32 @@ def _detection(rows, truth, baseline):
     }  # fmt: skip
 
 
-def _cli(*args, env):
+def _cli(*args, env, progress=False):
+    """Run the CLI; with ``progress`` its stderr (the progress bar) goes to ours."""
     cmd = [sys.executable, "-m", "whiskerid.cli", *map(str, args)]
-    t0 = time.perf_counter()
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    t0, cpu0 = time.perf_counter(), _children_cpu()
+    proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=None if progress else subprocess.PIPE,
+                          text=True, env=env)  # fmt: skip
     if proc.returncode:
-        raise RuntimeError(f"{' '.join(cmd)} failed:\n{proc.stderr[-3000:]}")
+        raise RuntimeError(f"{' '.join(cmd)} failed:\n{(proc.stderr or '')[-3000:]}")
+    CPU.append(_children_cpu() - cpu0)
     return time.perf_counter() - t0, proc.stdout
+
+
+#: CPU seconds (user + system) of each CLI run, in order: unlike the wall time, nearly the
+#: same on a machine shared with other work (the load average is printed beside it).
+CPU: list[float] = []
+
+
+def _children_cpu() -> float:
+    import resource
+
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+def _say(text: str) -> None:
+    print(f"[fleet benchmark {time.strftime('%H:%M:%S')}] {text}", file=sys.stderr, flush=True)
 
 
 def simulated(args, work: Path, env) -> dict:
@@ -89,9 +113,14 @@ def simulated(args, work: Path, env) -> dict:
                            plucks=args.plucks, damaged=args.damaged, baseline=args.baseline,
                            seed=args.seed)  # fmt: skip
     sim_s = time.perf_counter() - t0
+    n_total = args.whiskers * args.sessions
+    _say(f"simulated {args.whiskers} x {args.sessions} x {args.plucks} in {sim_s:.0f} s; "
+         f"fleet calibrate of {n_total} sessions (its progress bar below) ...")  # fmt: skip
     extra = ["--ray", args.ray] if args.ray else []
-    fleet_s, out = _cli("fleet", "calibrate", work / "root", "--out", work / "out", "--quiet",
-                        "--json", *extra, env=env)  # fmt: skip
+    fleet_s, out = _cli("fleet", "calibrate", work / "root", "--out", work / "out", "--json",
+                        *extra, env=env, progress=True)  # fmt: skip
+    fleet_cpu, load_fleet = CPU[-1], os.getloadavg()[1]
+    _say(f"fleet calibrate: {fleet_s:.0f} s ({fleet_cpu:.0f} s CPU) for {n_total} sessions")
     summary = json.loads(out)
     rows = read_table(work / "out" / "fleet.csv")
     n_sessions = len(rows)
@@ -99,15 +128,25 @@ def simulated(args, work: Path, env) -> dict:
     # the shell loop, on a sample of sessions
     rng = random.Random(args.seed)
     sample = rng.sample(rows, min(args.loop_sample, n_sessions))
-    loop_s = 0.0
-    for r in sample:
+    loop_s, loop_cpu = 0.0, 0.0
+    for i, r in enumerate(sample):
+        _say(f"shell loop: whiskerid calibrate of session {i + 1}/{len(sample)} "
+             f"({loop_s:.0f} s so far)")  # fmt: skip
         folder = work / "root" / r["whisker"] / r["session"]
         files = sorted(folder.glob("*.csv"))
         dt, _ = _cli("calibrate", *files, "--whisker", work / "root" / r["whisker"] /
                      "whisker.toml", "--out", work / "loop" / f"{r['whisker']}-{r['session']}.toml",
                      env=env)  # fmt: skip
         loop_s += dt
+        loop_cpu += CPU[-1]
     loop_per_session = loop_s / max(len(sample), 1)
+    loop_cpu_per_session = loop_cpu / max(len(sample), 1)
+    load_loop = os.getloadavg()[1]
+    _say(f"fleet calibrate {fleet_s:.0f} s wall, {fleet_cpu:.0f} s CPU (load {load_fleet:.1f}) | "
+         f"shell loop {loop_per_session:.1f} s wall, {loop_cpu_per_session:.1f} s CPU a session "
+         f"x {n_sessions} (timed on {len(sample)}; load {load_loop:.1f}) | "
+         f"{loop_per_session * n_sessions / fleet_s:.1f}x wall, "
+         f"{loop_cpu_per_session * n_sessions / max(fleet_cpu, 1e-9):.1f}x CPU")  # fmt: skip
     # a rerun: nothing new
     rerun_s, out2 = _cli("fleet", "calibrate", work / "root", "--out", work / "out", "--quiet",
                          "--json", env=env)  # fmt: skip
@@ -132,6 +171,10 @@ def simulated(args, work: Path, env) -> dict:
         "shell_loop_s_per_session": round(loop_per_session, 3),
         "shell_loop_scaled_s": round(loop_per_session * n_sessions, 1),
         "speedup": round(loop_per_session * n_sessions / fleet_s, 2),
+        "fleet_calibrate_cpu_s": round(fleet_cpu, 1),
+        "shell_loop_cpu_s_per_session": round(loop_cpu_per_session, 2),
+        "speedup_cpu": round(loop_cpu_per_session * n_sessions / max(fleet_cpu, 1e-9), 2),
+        "load_average_5min": {"fleet": round(load_fleet, 1), "loop": round(load_loop, 1)},
         "rerun_s": round(rerun_s, 2),
         "rerun_fitted": json.loads(out2)["fitted"],
         **_detection(rows, truth, args.baseline),

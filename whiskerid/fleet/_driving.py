@@ -4,26 +4,38 @@ While the robot drives, the whisker's signal is its response to the base's motio
 terrain excites over a broad band: ``S_y(f) = |H(f)|² S_b(f)``, with ``H`` the deflection per
 unit base acceleration (near the first mode ``H ∝ 1/(1 − (f/f_1)² + 2iζ f/f_1)``: the
 base-motion model the classifier divides out) and ``S_b`` the base acceleration's spectrum,
-unknown but smooth on the scale of the resonance only *on average*: each terrain and speed
-shapes it (a wheel's contact patch nulls the wavelengths it spans, at ``f = v/patch``;
-joints, ripples and the motor add lines). So, as operational modal analysis does, the
-identification leans on many stretches of driving rather than on one:
+unknown and, within one stretch of driving, *not* smooth on the scale of the resonance. A
+wheeled robot's base motion has two features the width of the peak (``2ζf_1`` ≈ 2–5 Hz):
+
+* an **echo**: the rear wheels ride the front's profile ``τ = L/v`` later (``L`` the
+  wheelbase), so the spectrum is rippled by ``|a + b e^{-2πifτ}|² ∝ 1 + r cos(2πfτ)``, a
+  period ``v/L`` of 0.5–2 Hz at walking speeds and a depth of a factor of several;
+* a **null**: the contact patch averages the ground over its length, so the spectrum has a
+  ``sinc²(f·patch/v)`` factor, a null at ``f = v/patch`` that walks through f_1 as the
+  speed changes (filled a little by what does not pass the patch, the drivetrain).
+
+A resonance fitted with a smooth base takes both for the peak's shape: its f_1 is off by
+several percent in a minute whose null sits near f_1, and ten minutes' median scatters by
+0.8 % (1σ 0.25–1.6 %; measured on simulated drives). So each block's base spectrum is
+modelled with both (their parameters found in the data, not given):
 
 1. the drive is cut into blocks (each recording, or each :data:`BLOCK_S` of it); each
    block's spectrum is Welch's average of Hann windows of :data:`SEGMENT_S`;
 2. narrow lines (the motor's tone, periodic textures) are masked: bins more than
    :data:`LINE_FACTOR` times the running median over ``±max(1 Hz, 2ζf_1)`` (wider than
    the resonance, so that its peak is never taken for a line), and two bins either side;
-3. each block's log-spectrum over ``[0.8, 1.25] f_1`` is fitted by
-   ``log S = log|H(f; f_1, ζ)|² + c_0 + c_1 x + c_2 x²`` (``x = ln(f/f_1)``: the base's
-   spectrum, smooth over the band) with a Cauchy loss (scale 0.5 in ln): a null of the
-   base's spectrum is an outlier, not a narrower peak;
-4. the drive's ζ is the median of the blocks' (robust to the blocks whose terrain shapes
-   the band), its f_1 that of one fit of every block's bins at once (f_1 and ζ shared,
-   each block its own base spectrum, the same loss), started from the medians; the 1σ of
-   both are the medians' standard errors from the blocks' spread, ``1.253 · 1.4826 MAD /
-   √n``. The block fits are repeated once with the band centred on the median f_1 (a
-   whisker whose f_1 moved keeps its peak in the middle of the band).
+3. the echo's delay τ is the peak of the cepstrum of the block's whole log-spectrum
+   (:func:`echo_delay`: the ripple runs over every frequency, the resonance over a few Hz);
+4. each block's log-spectrum over ``[0.8, 1.25] f_1`` is fitted by
+   ``ln S = −ln|1 − (f/f_1)² + 2iζf/f_1|² + ln(1 + r cos 2πfτ) + ln(sinc²(fa) + ε)
+   + c_0 + c_1 x + c_2 x²`` (``x = ln(f/f_1)``), τ refined, the null's crossing time ``a``
+   started from a grid of places (:data:`NULLS`, and none), with a Cauchy loss (scale 0.5
+   in ln) against what is left (a line the mask missed); a first pass with a smooth base
+   centres the band on the whisker's f_1 as it is now;
+5. the drive's f_1 and ζ are the medians of the blocks', their 1σ the medians' standard
+   errors from the blocks' spread, ``1.253 · 1.4826 MAD / √n`` (the blocks are
+   independent stretches of driving, so their spread holds the base's leftovers as well as
+   the periodogram's noise).
 
 A drive is a *session* of the whisker's health log (``FLEET/health.csv``, the fleet table's
 columns; each block takes a pluck's place), which ``whiskerid fleet check`` reads beside
@@ -49,6 +61,10 @@ LINE_FACTOR = 3.0
 LOSS_SCALE = 0.5
 #: Order of the polynomial (in ln f) standing for the base's spectrum over the band.
 ORDER = 2
+#: Delays of the base motion's echo searched (s): a wheelbase over the speed.
+ECHO_S = (0.3, 4.0)
+#: Start places of the contact patch's null searched, relative to f_1.
+NULLS = tuple(np.linspace(0.7, 1.5, 9))
 
 
 @dataclass
@@ -107,8 +123,40 @@ def line_mask(f, p, f1_hz: float, zeta: float) -> np.ndarray:
     return ~(np.convolve(line, np.ones(5), "same") > 0)
 
 
-def fit_block(f, p, f1_hz: float, zeta: float) -> tuple[float, float, str]:
+def echo_delay(f, p) -> float:
+    """The delay (s) of the base motion's strongest echo: the peak of the cepstrum of the
+    log-spectrum (5–95 % of the band up to Nyquist, its 4 Hz running median removed) at
+    quefrencies of :data:`ECHO_S`. A two-axle robot's rear wheels ride the front's profile
+    ``L/v`` later, which ripples the spectrum as ``1 + r cos(2πfL/v)``."""
+    from scipy.ndimage import median_filter
+
+    df = float(f[1] - f[0])
+    m = (f > 0.05 * f[-1]) & (f < 0.95 * f[-1]) & (p > 0)
+    lp = np.log(p[m])
+    lp = np.clip(lp - median_filter(lp, size=int(4.0 / df) | 1, mode="nearest"), -2, 2)
+    n = 1 << max(16, int(lp.size).bit_length() + 4)
+    c = np.abs(np.fft.rfft(lp * np.hanning(lp.size), n))
+    q = np.fft.rfftfreq(n, df)
+    k = (q > ECHO_S[0]) & (q < ECHO_S[1])
+    return float(q[k][np.argmax(c[k])])
+
+
+def _block_model(ff, f1, z, r, tau, a, floor):
+    """ln of the block's spectrum less its smooth part: resonance, echo ripple, patch null."""
+    return (-np.log((1 - (ff / f1) ** 2) ** 2 + (2 * z * ff / f1) ** 2)
+            + np.log1p(r * np.cos(2 * np.pi * ff * tau))
+            + np.log(np.sinc(ff * a) ** 2 + floor))  # fmt: skip
+
+
+def fit_block(f, p, f1_hz: float, zeta: float, *, base: bool = True) -> tuple[float, float, str]:
     """f_1 and ζ of one block's spectrum, from the start ``f1_hz``, ``zeta`` (the record's).
+
+    The base's spectrum over the band is a quadratic in ``ln f`` times the echo ripple
+    ``1 + r cos(2πfτ)`` (τ from :func:`echo_delay`, refined) times a contact patch's
+    ``sinc²(fa) + ε`` (a box average over the patch, ``a`` its crossing time ``patch/v``;
+    ``ε`` the part of the base's motion that does not pass the patch, the drivetrain's). The
+    null's place is searched on a grid over the band and beyond (or none: ``a`` small).
+    With ``base=False`` the echo and the null are left out (a quick first look).
 
     Returns:
         ``(f1, zeta, status)``; status ``ok`` or why not.
@@ -117,70 +165,46 @@ def fit_block(f, p, f1_hz: float, zeta: float) -> tuple[float, float, str]:
 
     keep = (f > BAND[0] * f1_hz) & (f < BAND[1] * f1_hz) & (p > 0)
     keep &= line_mask(f, p, f1_hz, zeta)
-    if keep.sum() < 4 * (ORDER + 3):
+    if keep.sum() < 4 * (ORDER + 7):
         return math.nan, math.nan, "too few bins"
     ff, lp = f[keep], np.log(p[keep])
     x = np.vander(np.log(ff / f1_hz), ORDER + 1)
-
-    def shape(f1, z):
-        return -np.log((1 - (ff / f1) ** 2) ** 2 + (2 * z * ff / f1) ** 2)
+    tau = echo_delay(f, p)
 
     def residual(th):
-        return lp - shape(th[0], math.exp(th[1])) - x @ th[2:]
+        shape = _block_model(ff, th[0], math.exp(th[1]), math.tanh(th[2]), th[3], th[4],
+                             math.exp(th[5]))  # fmt: skip
+        return lp - shape - x @ th[6:]
 
-    c0 = np.linalg.lstsq(x, lp - shape(f1_hz, zeta), rcond=None)[0]
-    lo = [BAND[0] * f1_hz, math.log(1e-3)] + [-np.inf] * (ORDER + 1)
-    hi = [BAND[1] * f1_hz, math.log(0.5)] + [np.inf] * (ORDER + 1)
-    r = least_squares(residual, np.r_[f1_hz, math.log(zeta), c0], bounds=(lo, hi),
-                      loss="cauchy", f_scale=LOSS_SCALE,
-                      x_scale=np.r_[0.01 * f1_hz, 0.1, np.ones(ORDER + 1)])  # fmt: skip
-    f1, z = float(r.x[0]), float(math.exp(r.x[1]))
-    at_edge = not (lo[0] < f1 < hi[0]) or not (1e-3 < z < 0.5)
-    if not r.success or at_edge or not (BAND[0] * f1_hz * 1.02 < f1 < BAND[1] * f1_hz / 1.02):
+    lo = [BAND[0] * f1_hz, math.log(1e-3), -3.0, ECHO_S[0], 0.0, -12.0] + [-np.inf] * (ORDER + 1)
+    hi = [BAND[1] * f1_hz, math.log(0.5), 3.0, ECHO_S[1], 2 / f1_hz, 2.0] + [np.inf] * (ORDER + 1)
+    tau = min(max(tau, ECHO_S[0] * 1.001), ECHO_S[1] * 0.999)
+    best = None
+    nulls = [*NULLS, 1e3] if base else [1e3]  # the null's place / f_1 (1e3: none)
+    for null in nulls:
+        th = np.r_[f1_hz, math.log(zeta), math.atanh(0.5 if base else 0.0), tau, 1 / (null * f1_hz),
+                   math.log(0.05), np.zeros(ORDER + 1)]  # fmt: skip
+        th[6:] = np.linalg.lstsq(x, residual(th), rcond=None)[0]
+        free = np.ones(th.size, bool) if base else np.r_[True, True, False, False, False, False,
+                                                            np.ones(ORDER + 1, bool)]  # fmt: skip
+
+        def res_free(u, th=th, free=free):
+            full = th.copy()
+            full[free] = u
+            return residual(full)
+
+        bounds = (np.array(lo)[free], np.array(hi)[free])
+        r = least_squares(res_free, th[free], bounds=bounds, loss="cauchy", f_scale=LOSS_SCALE,
+                          max_nfev=200,
+                          x_scale=np.r_[0.01 * f1_hz, 0.1, 0.3, 0.01 * tau, 0.01 * th[4] + 1e-9,
+                                        np.ones(ORDER + 2)][free])  # fmt: skip
+        if best is None or r.cost < best.cost:
+            best = r
+    f1, z = float(best.x[0]), float(math.exp(best.x[1]))  # f_1 and ln ζ are always free
+    inside = BAND[0] * f1_hz * 1.02 < f1 < BAND[1] * f1_hz / 1.02 and 1.1e-3 < z < 0.45
+    if not inside:
         return f1, z, "no resonance in the band"
     return f1, z, "ok"
-
-
-def fit_joint(spectra, f1_hz: float, zeta: float) -> tuple[float, float, bool]:
-    """f_1 and ζ shared by every block, each block with its own smooth base spectrum (the
-    Cauchy loss over all bins: a null or a line in one block weighs little)."""
-    from scipy.optimize import least_squares
-    from scipy.sparse import lil_matrix
-
-    data = []
-    for f, p in spectra:
-        keep = (f > BAND[0] * f1_hz) & (f < BAND[1] * f1_hz) & (p > 0)
-        keep &= line_mask(f, p, f1_hz, zeta)
-        if keep.sum() >= 4 * (ORDER + 3):
-            data.append((f[keep], np.log(p[keep]), np.vander(np.log(f[keep] / f1_hz), ORDER + 1)))
-    if not data:
-        return math.nan, math.nan, False
-    k = ORDER + 1
-
-    def residual(th):
-        f1, z = th[0], math.exp(th[1])
-        out = []
-        for b, (ff, lp, x) in enumerate(data):
-            shape = -np.log((1 - (ff / f1) ** 2) ** 2 + (2 * z * ff / f1) ** 2)
-            out.append(lp - shape - x @ th[2 + b * k : 2 + (b + 1) * k])
-        return np.concatenate(out)
-
-    start = [f1_hz, math.log(zeta)]
-    sparsity = lil_matrix((sum(d[0].size for d in data), 2 + k * len(data)), dtype=int)
-    row = 0
-    for b, (ff, lp, x) in enumerate(data):
-        shape = -np.log((1 - (ff / f1_hz) ** 2) ** 2 + (2 * zeta * ff / f1_hz) ** 2)
-        start += list(np.linalg.lstsq(x, lp - shape, rcond=None)[0])
-        sparsity[row : row + ff.size, :2] = 1
-        sparsity[row : row + ff.size, 2 + b * k : 2 + (b + 1) * k] = 1
-        row += ff.size
-    lo = [BAND[0] * f1_hz, math.log(1e-3)] + [-np.inf] * (k * len(data))
-    hi = [BAND[1] * f1_hz, math.log(0.5)] + [np.inf] * (k * len(data))
-    r = least_squares(residual, start, bounds=(lo, hi), loss="cauchy", f_scale=LOSS_SCALE,
-                      jac_sparsity=sparsity, x_scale="jac")  # fmt: skip
-    f1, z = float(r.x[0]), math.exp(float(r.x[1]))
-    inside = BAND[0] * f1_hz * 1.02 < f1 < BAND[1] * f1_hz / 1.02 and 1e-3 < z < 0.5
-    return f1, z, bool(r.success and inside)
 
 
 def _median_and_error(values) -> tuple[float, float]:
@@ -227,12 +251,12 @@ def identify_driving(
         seconds += y.size / rate_hz
         spectra.append((name, *block_spectrum(y, rate_hz)))
     centre = f1_hz
-    for _ in range(2):  # the second pass centres the band on what the first found
-        fits = [(name, *fit_block(f, p, centre, zeta)) for name, f, p in spectra]
-        good = [(f1, z) for _, f1, z, s in fits if s == "ok"]
-        if not good:
-            break
-        centre = float(np.median([f1 for f1, _ in good]))
+    # a quick look (a smooth base) centres the band on the whisker's f_1 as it is now
+    quick = [fit_block(f, p, centre, zeta, base=False) for _, f, p in spectra]
+    good = [f1 for f1, _, s in quick if s == "ok"]
+    if good:
+        centre = float(np.median(good))
+    fits = [(name, *fit_block(f, p, centre, zeta)) for name, f, p in spectra]
     blocks = [{"name": n, "f1_hz": f1, "zeta": z, "status": s} for n, f1, z, s in
               (fits if spectra else [])]  # fmt: skip
     good = [b for b in blocks if b["status"] == "ok"]
@@ -241,21 +265,36 @@ def identify_driving(
         return DriveFit(why, blocks=blocks, seconds=seconds)
     f1, f1_std = _median_and_error([b["f1_hz"] for b in good])
     z, z_std = _median_and_error([b["zeta"] for b in good])
-    # f_1 from all blocks' bins at once (a peak's place is shared, each block's base its
-    # own); ζ stays the blocks' median: the joint fit's peak width takes up what the
-    # blocks' bases leave over (measured: f_1 closer, ζ 10-30 % high on simulated drives)
-    f1_j, _, ok = fit_joint([(f, p) for _, f, p in spectra], f1, z)
-    if ok:
-        f1 = f1_j
     return DriveFit("ok", f1, f1_std, z, z_std, blocks, seconds)
 
 
+#: A block further than this many robust σ (1.4826 MAD) from the drive's median f_1 or ln ζ
+#: is an outlier in the health log: kept out of the blocks' spread that ``fleet check`` reads
+#: (the drive's values are medians, which such a block hardly moves).
+OUTLIER_MADS = 3.5
+
+
+def _outliers(blocks) -> set[int]:
+    ok = [i for i, b in enumerate(blocks) if b["status"] == "ok"]
+    out: set[int] = set()
+    if len(ok) < 3:
+        return out
+    for key, fn in (("f1_hz", float), ("zeta", math.log)):
+        v = np.array([fn(blocks[i][key]) for i in ok])
+        med = float(np.median(v))
+        scale = 1.4826 * float(np.median(np.abs(v - med)))
+        out |= {i for i, x in zip(ok, v, strict=True) if abs(x - med) > OUTLIER_MADS * scale}
+    return out
+
+
 def health_row(whisker: str, session: str, fit: DriveFit, files: list[str]) -> dict:
-    """The health log's row of one drive (the fleet table's columns; blocks as plucks)."""
+    """The health log's row of one drive (the fleet table's columns; blocks as plucks; a
+    block far from the others, see :data:`OUTLIER_MADS`, marked ``outlier``)."""
     from ._table import COLUMNS
 
     row = {c: "" for c in COLUMNS}
-    ok = [b for b in fit.blocks if b["status"] == "ok"]
+    far = _outliers(fit.blocks)
+    ok = [b for i, b in enumerate(fit.blocks) if b["status"] == "ok" and i not in far]
     sd = lambda v: float(np.std(v, ddof=1)) if len(v) > 1 else math.nan  # noqa: E731
     row.update(
         whisker=whisker,
@@ -272,7 +311,10 @@ def health_row(whisker: str, session: str, fit: DriveFit, files: list[str]) -> d
         zeta_plucks=";".join(f"{b['zeta']:.10g}" for b in fit.blocks),
         f1_pluck_sd=f"{sd([b['f1_hz'] for b in ok]):.4g}",
         zeta_pluck_sd=f"{sd([b['zeta'] for b in ok]):.4g}",
-        pluck_status=";".join("ok" if b["status"] == "ok" else "outlier" for b in fit.blocks),
+        pluck_status=";".join(
+            "ok" if b["status"] == "ok" and i not in far else "outlier"
+            for i, b in enumerate(fit.blocks)
+        ),
         files=";".join(files),
         fitted_at=datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
     )
