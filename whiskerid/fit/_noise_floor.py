@@ -11,8 +11,9 @@ differences, ``σ̂² = Σ(Δ²q)²/(6(m−2))``: a held deflection's offset, sl
 tremor (8–12 Hz, suppressed by ``(2 − 2cos 2πf/f_s)² ≤ 0.01`` at 200 Hz) do not enter it, and
 what little does makes the floor larger, never smaller. Second differences beyond :data:`TRIM`
 robust standard deviations (the kinks of the hand's ramp, a knock) are left out; the stretch
-ends one period of the decay's frequency before its first sample (a tap's impact). For Gaussian noise the estimate has
-``Var σ̂² = 2·70σ⁴/(36(m−2))`` (the second differences' autocovariances are ``6σ², −4σ², σ²``),
+ends one period of the decay's frequency before its first sample (a tap's impact). For
+Gaussian noise the estimate has ``Var σ̂² = 2·70σ⁴/(36(m−2))`` (the second differences'
+autocovariances are ``6σ², −4σ², σ²``),
 the variance of a χ² estimate with ``ν = 36(m−2)/70 ≈ 0.51(m−2)`` degrees of freedom. Samples
 quantised to a step ``q`` (ADC codes, or volts on a lattice of codes, detected from the
 samples) add the rounding of a moving signal, ``q²/12``, to what the decay's residuals can
