@@ -94,3 +94,23 @@ def test_quiet_stretch_stops_before_a_tap_and_skips_unseen_releases():
     assert NF.quiet_stretch(t, y, [d2], 0).size == 2000 - 1801 - NF.MARGIN
     d3 = Decay(start_s=t[0], end_s=t[1990], frequency_hz=f, from_start=True)
     assert NF.quiet_stretch(t, y, [d3], 0) is None
+
+
+def test_recording_decays_carry_their_quiet_stretch():
+    """A held pluck read as the command line reads it: the decay's observation carries the
+    hold (not the decay), whose floor is the noise put in."""
+    from whiskerid.fit import observations_from_recording
+    from whiskerid.io import Recording
+    from whiskerid.model import paper_record
+
+    rng = np.random.default_rng(6)
+    fs, f, zeta, sigma = 200.0, 46.0, 0.03, 0.002
+    t = np.arange(int(3.0 * fs)) / fs
+    tau = t - 0.8
+    y = np.where(tau < 0, 1.0, np.exp(-zeta * 2 * np.pi * f * tau) * np.cos(2 * np.pi * f * tau))
+    y = 1.65 + 0.3 * y + rng.normal(0, sigma, t.size)
+    rec = Recording(t=t, columns={"voltage": y}, meta={"units": "V", "excitation": "decay"})
+    (obs,) = observations_from_recording(rec, paper_record(), observable="voltage")
+    assert obs.quiet is not None and obs.quiet.size >= 0.8 * fs - 12
+    assert np.all(np.abs(obs.quiet - (1.65 + 0.3)) < 6 * sigma)  # the hold only
+    assert NF.noise_floor(obs.quiet)["sigma"] == pytest.approx(sigma, rel=0.2)
