@@ -41,7 +41,7 @@ def test_nonlinear_posterior_agrees_with_calibrate_and_covers_the_truth():
     record, obs, truth = _pluck(rate=200.0, seed=1)
     cal = calibrate(record, obs, n_modes=1, model="nonlinear", nl_terms=("cubic", "quadratic"))
     assert cal.status == "ok", cal.warnings
-    post = P.sample_posterior(cal.record, obs, walkers=32, steps=1500, seed=3)
+    post = P.sample_posterior(cal.record, obs, walkers=32, steps=2000, seed=3)
     assert post.diagnostics["converged"], post.diagnostics["message"]
     assert post.provenance["model"] == "nonlinear"
     assert "nl.cubic" in post.chain_names and "nl.coulomb" not in post.chain_names

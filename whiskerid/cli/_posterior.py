@@ -38,7 +38,7 @@ def add_posterior(sub, command_error) -> None:
             "nonlinear model: f0 and zeta0 (reported as f1_hz and zeta), the nonlinear "
             "coefficients it fitted (flat priors) and the backbone at the smallest and largest "
             "amplitudes, with the linear nuisances sampled (each step solves the slow flow: "
-            "slower, give --steps 1500 or more)."
+            "slower, give --steps 2000 or more)."
         ),
         formatter_class=HelpFormatter,
     )
