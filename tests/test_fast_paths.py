@@ -1,8 +1,8 @@
 """The calibration's light replacements give what they replace.
 
 The warm command line avoids SciPy (its import costs more than the fit) and JAX calls outside
-the compiled program (each costs a lowering and a cache read): the χ² survival function in
-closed form against ``scipy.stats.chi2``, the release finder's Levenberg–Marquardt against
+the compiled program (each costs a lowering and a cache read): the χ² and F survival functions
+against ``scipy.stats``, the release finder's Levenberg–Marquardt against
 ``scipy.optimize.least_squares(method="lm")`` on the finder's own fits, and the amplitude test
 on what the compiled program returns against the same test computed with JAX afterwards.
 """
@@ -13,6 +13,7 @@ import pytest
 import whiskerid as wi
 from whiskerid.fit import _release
 from whiskerid.fit._chi2 import chi2_sf
+from whiskerid.fit._fdist import f_sf
 from whiskerid.fit._lm import least_squares
 
 
@@ -27,6 +28,21 @@ def test_chi2_survival_matches_scipy(k):
     assert chi2_sf(0.0, k) == 1.0 and chi2_sf(np.inf, k) == 0.0
     with pytest.raises(ValueError, match="whole number"):
         chi2_sf(1.0, 1.5)
+
+
+@pytest.mark.parametrize(
+    ("d1", "d2"), [(1.0, 1.0), (5.0, 2.5), (40.0, 12.7), (900.0, 300.5), (2e4, 51.0)]
+)
+def test_f_survival_matches_scipy(d1, d2):
+    from scipy.stats import f
+
+    x = np.concatenate([np.geomspace(1e-4, 1e3, 60), [0.5, 1.0, 2.0]])
+    ours = np.array([f_sf(v, d1, d2) for v in x])
+    theirs = f.sf(x, d1, d2)
+    assert np.all(np.abs(ours - theirs) <= 1e-9 * theirs + 1e-14)
+    assert f_sf(0.0, d1, d2) == 1.0 and f_sf(np.inf, d1, d2) == 0.0
+    with pytest.raises(ValueError, match="positive"):
+        f_sf(1.0, 0.0, 2.0)
 
 
 def _two_lines(seed):

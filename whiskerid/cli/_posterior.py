@@ -34,7 +34,11 @@ def add_posterior(sub, command_error) -> None:
             "log-uniform on [1e-6, 10]). Writes DIR/posterior.toml (the record with a "
             "[posterior] table), DIR/chain.h5, DIR/corner.png and DIR/trace.png. A run "
             "shorter than 50 autocorrelation times is reported as not converged; --resume "
-            "continues it."
+            "continues it. A record calibrated with --model nonlinear is sampled in the "
+            "nonlinear model: f0 and zeta0 (reported as f1_hz and zeta), the nonlinear "
+            "coefficients it fitted (flat priors) and the backbone at the smallest and largest "
+            "amplitudes, with the linear nuisances sampled (each step solves the slow flow: "
+            "slower, give --steps 2000 or more)."
         ),
         formatter_class=HelpFormatter,
     )
@@ -85,6 +89,9 @@ def add_posterior(sub, command_error) -> None:
 
 #: What ``posterior`` writes into its --out folder.
 OUTPUTS = ("posterior.toml", "chain.h5", "corner.png", "trace.png")
+
+#: The nonlinear model's coefficients, printed when a nonlinear record is sampled.
+NONLINEAR_REPORTED = ("gamma_per_m2", "quadratic_per_m", "coulomb_m_s2")
 
 #: Samples (all recordings together) above which a note says how to use fewer.
 MANY_SAMPLES = 20_000
@@ -154,7 +161,7 @@ def _cmd_posterior(args, command_error, parser) -> dict:
     WATCH.notes.clear()
     out_toml = post.record.save(args.out / "posterior.toml")
     d = post.diagnostics
-    for name in ("f1_hz", "zeta", "kappa", "EI", "C"):
+    for name in ("f1_hz", "zeta", "kappa", "EI", "C", *NONLINEAR_REPORTED):
         if name in post.params:
             q = post.params[name]
             tau, ess = (f"{q[k]:.3g}" if math.isfinite(q[k]) else "unknown (too few steps)"
@@ -180,9 +187,10 @@ def _check_out(args, command_error, chain: Path) -> None:
         raise command_error(f"--resume: no chain at {chain}; leave --resume out to start one")
     inputs = {"REC": args.recordings, "--fit": args.fit, "--static": args.static}
     names = [n for n in OUTPUTS if not (args.resume and n == "chain.h5")]
-    # Per walker and step: the parameters (a few shared, a few per recording), the
+    # Per walker and step: the parameters (a few shared, a few per recording; the nonlinear
+    # model samples the linear coefficients too), the
     # log-probability and emcee's bookkeeping, as float64; twice over for HDF5's chunks.
-    per_step = args.walkers * (8 + 4 * len(args.recordings)) * 8 * 2
+    per_step = args.walkers * (8 + 8 * len(args.recordings)) * 8 * 2
     for n in names:
         check_outputs(
             {"--out": args.out / n},

@@ -33,6 +33,7 @@ from ._checks import hac_covariance
 from ._chi2 import chi2_sf
 from ._core import _padded as padded_problem
 from ._core import unflatten_numpy
+from ._noise_floor import check_noise_floor
 from ._nonlinear import tip_per_sensor
 from ._problem import ZETA_MAX, residuals_and_jacobian
 
@@ -300,6 +301,20 @@ def finish(cal, observations, model: str, terms=None, *, resid=None, jac=None, c
                 cal.status = "check"
             cal.record.extra["fit"]["status"] = cal.status
             cal.record.extra["fit"]["warnings"] = list(cal.warnings)
+    check_noise_floor(cal, observations, _LINEAR_ADVICE)
     if model == "linear" or (model == "auto" and not (test and test["rejects"])):
         return cal
-    return calibrate_nonlinear(cal, observations, terms=terms or NL_TERMS)
+    nl = calibrate_nonlinear(cal, observations, terms=terms or NL_TERMS)
+    check_noise_floor(nl, observations, _NONLINEAR_ADVICE)
+    return nl
+
+
+#: What to do when a fit's residuals stand above the noise floor (:mod:`._noise_floor`).
+_LINEAR_ADVICE = (
+    "an amplitude-dependent frequency or damping (fit with --model nonlinear), a mode left "
+    "out (--modes) or a decay that starts in the wrong place (--t-start)"
+)
+_NONLINEAR_ADVICE = (
+    "a mode left out (--modes), nonlinear terms that do not describe the whisker, "
+    "or a decay that starts in the wrong place (--t-start)"
+)

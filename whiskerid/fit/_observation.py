@@ -17,6 +17,7 @@ from ..io import (
     timestamp_rate,
 )
 from ..model import WhiskerRecord
+from ._noise_floor import quiet_stretch
 from ._release import find_decays, steady_line
 
 G0 = 9.80665  # m/s² per g
@@ -48,6 +49,9 @@ class Observation:
         name: Label used in reports.
         source: File it came from (hashed into the record), if any.
         selection: How the samples were chosen (for reports), e.g. where a decay was found.
+        quiet: Samples of a quiet stretch of the same recording (the hold before the release,
+            or the rest after the decay), in the units of ``y``: the noise floor the fit's
+            residuals are compared with (``whiskerid.fit._noise_floor``); None when unknown.
     """
 
     t: np.ndarray
@@ -62,6 +66,7 @@ class Observation:
     name: str = "recording"
     source: str | None = None
     selection: str | None = None
+    quiet: np.ndarray | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "t", np.asarray(self.t, dtype=float))
@@ -353,12 +358,13 @@ def _decay_windows(obs: Observation, t_end, path, *, first_only: bool) -> list[O
             else " Give --t-start at the release, or the right --excitation."
         )
         raise CalibrationError(f"{path}: no free decay (a pluck or tap ringing down) found.{hint}")
-    decays = decays[:1] if first_only else decays
+    found, decays = decays, (decays[:1] if first_only else decays)
     out = []
     for k, d in enumerate(decays):
         name = obs.name if len(decays) == 1 else f"{obs.name}#{k + 1}"
         o = obs.window(d.start_s, d.end_s)
-        out.append(_replace(o, name=name, selection=f"decay {d.describe()}"))
+        quiet = quiet_stretch(obs.t, obs.y, found, k)
+        out.append(_replace(o, name=name, selection=f"decay {d.describe()}", quiet=quiet))
     return out
 
 

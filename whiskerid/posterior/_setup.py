@@ -84,6 +84,7 @@ def setup_posterior(
     prior: dict | None = None,
     f1_start_hz: float | None = None,
     added_mass: list | None = None,
+    nl_terms: tuple[str, ...] | None = None,
 ) -> Problem:
     """Fit the calibration model (its Laplace approximation) and build the log-posterior.
 
@@ -104,17 +105,29 @@ def setup_posterior(
         added_mass: One :class:`whiskerid.fit.AddedMass` (or None) per recording: sample the
             added-mass model (EI and ρa fitted, each mass under its stated Gaussian prior),
             as :func:`whiskerid.calibrate` fits it.
+        nl_terms: For a record fitted with ``--model nonlinear``: the nonlinear terms to
+            sample (the record's by default). Such a record is sampled in the nonlinear
+            model's parameters (f₀, ζ₀, the nonlinear coefficients; the linear coefficients
+            sampled, not marginalised): see :mod:`whiskerid.posterior._nonlinear`.
 
     Returns:
         A :class:`Problem`.
     """
+    from ._nonlinear import is_nonlinear, setup_nonlinear  # it builds on this module
+
     obs = [observations] if isinstance(observations, Observation) else list(observations)
     if not obs:
         raise PosteriorError("no recordings")
     if likelihood not in LIKELIHOODS:
         raise PosteriorError(f"likelihood must be one of {LIKELIHOODS}, not {likelihood!r}")
+    nonlinear = is_nonlinear(record)
+    if nonlinear and (static is not None or added_mass is not None):
+        raise PosteriorError(
+            "the record holds a nonlinear calibration, which fits free decays only: sample a "
+            "static test or added masses on a record calibrated with --model linear"
+        )
     if marginalize is None:
-        marginalize = likelihood == "gaussian"
+        marginalize = likelihood == "gaussian" and not nonlinear
     if marginalize and likelihood != "gaussian":
         raise PosteriorError("only the Gaussian likelihood can marginalise the linear nuisances")
     if not nu > 0:
@@ -126,6 +139,10 @@ def setup_posterior(
     pin = "geometry" if pin == "auto" else pin
     table = prior if prior is not None else record.extra.get("prior")
     user = parse_prior(table)
+    if nonlinear:
+        return setup_nonlinear(record, obs, n_modes=n_modes, pin=pin, likelihood=likelihood,
+                               nu=nu, marginalize=marginalize, user_prior=user,
+                               f1_start_hz=f1_start_hz, nl_terms=nl_terms)  # fmt: skip
 
     problem, theta_hat, cov_full, sig = _laplace(
         record, obs, static, n_modes, zeta_per_mode, pin, f1_start_hz, added_mass

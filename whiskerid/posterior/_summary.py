@@ -92,6 +92,8 @@ def without_none(obj):
 
 def derived_quantities(prob: Problem, z: np.ndarray) -> tuple[np.ndarray, list[str]]:
     """Reported quantities (f_1, ζ, κ, EI or C …, σ per recording) at points ``z``."""
+    if hasattr(prob, "derived_quantities"):  # the nonlinear model's (its own names)
+        return prob.derived_quantities(z)
     m = prob.model
     problem = prob.args["problem"]
     names = reported_names(problem)
@@ -223,10 +225,16 @@ def _provenance(prob, walkers, seed, move):
         if prob.model.marginal
         else "sampled (flat prior)",
         "noise": "unknown sigma per recording, sampled as log sigma",
-        "n_modes": prob.args["problem"].n_modes,
+        "model": "nonlinear" if hasattr(prob, "amplitudes_m") else "linear",
+        "n_modes": getattr(prob.args["problem"], "base", prob.args["problem"]).n_modes,
         "pin": prob.pin,
         "priors": prob.priors,
         "start": "Laplace approximation of the calibration fit",
+        **(
+            {"backbone_amplitudes_m": list(prob.amplitudes_m)}
+            if hasattr(prob, "amplitudes_m")
+            else {}
+        ),
         "data_files": files,
         "whiskerid_version": __version__,
         "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
