@@ -7,10 +7,39 @@ import jax
 import numpy as np
 import pytest
 
-from whiskerid.terrain import PARAM_NAMES, contact_twin, fit_contact
+from whiskerid.model import paper_record
+from whiskerid.terrain import (
+    PARAM_NAMES,
+    STAT_NAMES,
+    amplified_hall,
+    contact_twin,
+    fit_contact,
+    recording_stats,
+)
 
 #: ln k (N/m), ln d₀ (m), ln μ, ln ρ (m), slope: a compliant ground (k ≈ 4 × the tip's)
 TRUTH = np.array([np.log(200.0), np.log(1.2e-3), np.log(0.5), np.log(2e-4), 2.3])
+
+
+def test_statistics_see_the_clipping_and_the_band():
+    """A 50 Hz tone puts its power in the 45–60 Hz band and is symmetric; the same tone
+    with its lower half clipped (a tip that loses the ground) is skewed and its quantiles
+    asymmetric, and neither changes the band that holds the power."""
+    hall = amplified_hall(paper_record())
+    t = np.arange(20 * 200) / 200
+    tone = 1e-6 * np.sin(2 * np.pi * 50.3 * t + 0.3)
+    bands = [i for i, n in enumerate(STAT_NAMES) if n.startswith("lnP")]
+    for x, sign in ((tone, 0), (np.maximum(tone, -0.2e-6), 1)):
+        mean, cov = recording_stats(hall.voltage(x), hall)
+        assert STAT_NAMES[bands[int(np.argmax(mean[bands]))]] == "lnP_45_60"
+        skew, asym = mean[STAT_NAMES.index("skewness")], mean[-1]
+        if sign == 0:
+            assert abs(skew) < 0.05 and abs(asym) < 0.05
+        else:
+            assert skew > 0.3 and asym > 0.3
+        assert np.all(np.linalg.eigvalsh(cov) > -1e-12)
+    with pytest.raises(ValueError, match="windows"):
+        recording_stats(hall.voltage(tone[:1000]), hall)
 
 
 @pytest.mark.slow

@@ -90,20 +90,34 @@ def window_stats(x: jax.Array) -> jax.Array:
     return jnp.stack([mean, *bands, skew, asym], axis=1)
 
 
-def recording_stats(volts, hall: HallSensor) -> tuple[np.ndarray, np.ndarray]:
-    """Mean statistics of a 200 Hz Hall recording and their per-window covariance.
+_window_stats = jax.jit(window_stats)  # one compilation, not one per operation
+
+
+def recording_stats(volts, hall: HallSensor, *, block: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """Mean statistics of a 200 Hz Hall recording and the covariance per window.
+
+    Consecutive windows share the profile's long wavelengths, so their statistics are
+    correlated: the covariance of one window's statistics is inflated, statistic by
+    statistic, by the ratio of the variance of means of ``block`` consecutive windows to
+    what independent windows would give (at least 1), so that dividing it by the number of
+    windows gives the variance of the mean.
 
     Returns:
-        ``(mean, cov)``: shapes ``(stats,)`` and ``(stats, stats)`` (the covariance of one
-        window's statistics; divide by the number of windows for the mean's).
+        ``(mean, cov)``: shapes ``(stats,)`` and ``(stats, stats)``.
     """
     v = np.asarray(volts, dtype=float)
     n = v.size // WINDOW
-    if n < 4:
-        raise ValueError(f"{v.size} samples make {n} windows of {WINDOW}; need at least 4")
+    if n < 2 * block:
+        raise ValueError(
+            f"{v.size} samples make {n} windows of {WINDOW}; need at least {2 * block}"
+        )
     x = _to_um(v[: n * WINDOW].reshape(n, WINDOW), hall)
-    s = np.asarray(window_stats(jnp.asarray(x)))
-    return s.mean(axis=0), np.cov(s, rowvar=False)
+    s = np.asarray(_window_stats(jnp.asarray(x)))
+    cov = np.cov(s, rowvar=False)
+    nb = n // block
+    means = s[: nb * block].reshape(nb, block, -1).mean(axis=1)
+    ratio = np.maximum(np.var(means, axis=0, ddof=1) * block / np.diag(cov), 1.0)
+    return s.mean(axis=0), cov * np.sqrt(np.outer(ratio, ratio))
 
 
 def _to_um(volts, hall: HallSensor):
@@ -155,13 +169,23 @@ class ContactTwin(eqx.Module):
         """``(z, ż)`` on the grid (m, m/s) of one draw for parameters ``p``."""
         n = self.grid_n
         f = np.fft.rfftfreq(n, 1 / GRID_HZ)
-        band = (f >= 0.5) & (f <= 400.0)
-        nsp = jnp.where(band, f, 1.0) / self.speed / N0
+        # each bin carries the spectrum's integral over its width (not its value at the
+        # centre: the steep spectrum would otherwise put a power that depends on the
+        # grid's length into the lowest bins)
+        lo = np.clip(f - GRID_HZ / n / 2, 0.5, 400.0)
+        hi = np.clip(f + GRID_HZ / n / 2, 0.5, 400.0)
+        band = hi > lo
+        scale = self.speed * N0
+        ua = jnp.where(band, lo, 1.0) / scale
+        ub = jnp.where(band, hi, 2.0) / scale
         # bounded: a wild trial step must not blow the simulation up (zero slope outside)
         rough, slope = jnp.exp(jnp.clip(p[3], np.log(1e-7), np.log(1e-2))), jnp.clip(p[4], 0, 5)
-        psd = rough**2 / N0 * nsp ** (-slope) / self.speed
+        e = 1.0 - slope  # ∫ u^(−w) du = (u_b^e − u_a^e)/e, ln(u_b/u_a) at w = 1
+        near = jnp.abs(e) < 1e-4
+        e_safe = jnp.where(near, 1e-4, e)
+        power = rough**2 * jnp.where(near, jnp.log(ub / ua), (ub**e_safe - ua**e_safe) / e_safe)
         # amplitude per bin, zero out of band (no sqrt at 0: its derivative is infinite)
-        spec = jnp.where(band, jnp.sqrt(psd * GRID_HZ / n) / 2, 0.0) * white
+        spec = jnp.where(band, jnp.sqrt(jnp.where(band, power, 1.0)) / 2, 0.0) * white
         z = jnp.fft.irfft(spec, n) * n
         zd = jnp.fft.irfft(spec * 2j * np.pi * f, n) * n
         return jnp.stack([z, zd])
