@@ -52,16 +52,19 @@ def main() -> None:
             "pull": ((fit.params - truth) / fit.sd).round(2).tolist(),
             "data_information": fit.data_information.round(2).tolist(),
             "corr_stiffness_preload": round(float(fit.correlation[0, 1]), 3),
-            "chi2": round(fit.chi2, 2), "steps": fit.steps,
+            "chi2": round(fit.chi2, 2), "steps": fit.steps, "converged": fit.converged,
             "seconds": round(time.perf_counter() - t0, 2),
         })  # fmt: skip
     pulls = np.array([r["pull"] for r in rows])
     info = np.array([r["data_information"] for r in rows])
+    est = np.array([r["estimate"] for r in rows])
+    tru = np.array([r["truth"] for r in rows])
     from whiskerid.terrain._contact_fit import PRIOR_SD
 
     summary = {
         name: {"rms_pull": round(float(np.sqrt(np.mean(pulls[:, j] ** 2))), 2),
                "max_abs_pull": round(float(np.abs(pulls[:, j]).max()), 2),
+               "abs_error_per_case": np.abs(est[:, j] - tru[:, j]).round(2).tolist(),
                "median_data_over_prior_information":
                    round(float(np.median(info[:, j]) * PRIOR_SD[j] ** 2), 2)}
         for j, name in enumerate(PARAM_NAMES)
