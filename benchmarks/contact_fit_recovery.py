@@ -31,6 +31,13 @@ def main() -> None:
     ap.add_argument("--draws", type=int, default=1)
     ap.add_argument("--duration", type=float, default=3.0)
     ap.add_argument("--max-steps", type=int, default=12)
+    ap.add_argument(
+        "--stiffness-starts",
+        type=float,
+        nargs="*",
+        default=[],
+        help="further starting stiffnesses (N/m)",
+    )
     args = ap.parse_args()
 
     import equinox as eqx
@@ -45,7 +52,13 @@ def main() -> None:
         case_twin = contact_twin(v, draws=1, duration_s=20.0, seed=11 + i)
         volts = np.asarray(volts_of(case_twin, truth))
         t0 = time.perf_counter()
-        fit = fit_contact(volts, v, twin=twin.at_speed(v), max_steps=args.max_steps)
+        fit = fit_contact(
+            volts,
+            v,
+            twin=twin.at_speed(v),
+            max_steps=args.max_steps,
+            stiffness_starts=tuple(args.stiffness_starts),
+        )
         rows.append({
             "speed": v, "truth": truth.round(3).tolist(), "estimate": fit.params.round(3).tolist(),
             "sd": fit.sd.round(3).tolist(),
@@ -71,6 +84,7 @@ def main() -> None:
     }  # fmt: skip
     print(json.dumps({"benchmark": "contact_fit_recovery", "draws": args.draws,
                       "duration_s": args.duration, "max_steps": args.max_steps,
+                      "stiffness_starts": args.stiffness_starts,
                       "summary": summary, "cases": rows,
                       "note": "shared, loaded 2-core machine"}, indent=1))  # fmt: skip
 

@@ -317,6 +317,7 @@ def _solve(twin: ContactTwin, target, white_chol, p0, max_steps: int):
 
 def fit_contact(volts, speed_mps: float, *, twin: ContactTwin | None = None,
                 shrink: float = 0.3, max_steps: int = 30,
+                stiffness_starts: tuple[float, ...] = (),
                 **twin_options) -> ContactFit:  # fmt: skip
     """Fit the contact parameters of one 200 Hz Hall recording (see the module docstring).
 
@@ -327,6 +328,8 @@ def fit_contact(volts, speed_mps: float, *, twin: ContactTwin | None = None,
         shrink: Weight of the diagonal in the statistics' covariance (the rest is the
             sample covariance of a few windows, which alone would be noisy).
         max_steps: Levenberg–Marquardt steps at most.
+        stiffness_starts: Further starting stiffnesses (N/m), each fitted, the lowest
+            objective kept: a soft ground can have a second, stiffer solution.
         **twin_options: For :func:`contact_twin` when ``twin`` is not given.
     """
     twin = contact_twin(speed_mps, **twin_options) if twin is None else twin
@@ -335,8 +338,16 @@ def fit_contact(volts, speed_mps: float, *, twin: ContactTwin | None = None,
     cov = (1 - shrink) * cov + shrink * np.diag(np.diag(cov))
     cov = cov * (1 / n_obs + 1 / twin.sim_windows)
     chol = np.linalg.cholesky(cov)
-    p, jac, res, steps, ok = _solve(twin, jnp.asarray(mean), jnp.asarray(chol),
-                                jnp.asarray(PRIOR_MEAN), max_steps)  # fmt: skip
+    best = None
+    for k0 in (None, *stiffness_starts):
+        p0 = PRIOR_MEAN.copy()
+        if k0 is not None:
+            p0[0] = np.log(k0)
+        out = _solve(twin, jnp.asarray(mean), jnp.asarray(chol), jnp.asarray(p0), max_steps)
+        cost = float(np.sum(np.asarray(out[2]) ** 2))
+        if best is None or (np.isfinite(cost) and not cost >= best[0]):
+            best = (cost, out)
+    p, jac, res, steps, ok = best[1]
     jac, res = np.asarray(jac), np.asarray(res)
     ns = len(STAT_NAMES)
     if not (np.isfinite(jac).all() and np.isfinite(res).all()):
