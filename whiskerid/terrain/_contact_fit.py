@@ -322,7 +322,7 @@ def fit_contact(volts, speed_mps: float, *, twin: ContactTwin | None = None,
     """Fit the contact parameters of one 200 Hz Hall recording (see the module docstring).
 
     Args:
-        volts: The Hall voltage (V) at 200 Hz (at least 4 s).
+        volts: The Hall voltage (V) at 200 Hz (at least 8 s: two blocks of 4 windows).
         speed_mps: The robot's speed (m/s).
         twin: A prepared :func:`contact_twin` (one per speed compiles once).
         shrink: Weight of the diagonal in the statistics' covariance (the rest is the
