@@ -9,6 +9,13 @@ from ._contact import ContactResult as ContactResult
 from ._contact import contact_modes as contact_modes
 from ._contact import simulate_contact as simulate_contact
 from ._contact import static_state as static_state
+from ._contact_fit import PARAM_NAMES as PARAM_NAMES
+from ._contact_fit import STAT_NAMES as STAT_NAMES
+from ._contact_fit import ContactFit as ContactFit
+from ._contact_fit import ContactTwin as ContactTwin
+from ._contact_fit import contact_twin as contact_twin
+from ._contact_fit import fit_contact as fit_contact
+from ._contact_fit import recording_stats as recording_stats
 from ._contact_runs import TERRAIN_CONTACT as TERRAIN_CONTACT
 from ._contact_runs import TerrainContact as TerrainContact
 from ._contact_runs import contact_motion as contact_motion

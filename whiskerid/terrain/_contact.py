@@ -264,6 +264,8 @@ def simulate_contact(
     atol: float = 1e-10,
     max_steps: int = 2_000_000,
     solver=None,
+    fixed_step: bool = False,
+    adjoint=None,
 ) -> ContactResult:
     """Integrate the whisker with its tip on the ground from ``t_out[0]`` to ``t_out[-1]``.
 
@@ -282,20 +284,32 @@ def simulate_contact(
         max_steps: Step budget.
         solver: A diffrax solver instance; ``diffrax.Tsit5()`` by default (an implicit
             one, e.g. ``diffrax.Kvaerno5()``, for very stiff contacts).
+        fixed_step: Step from each output time to the next instead (``t_out`` uniform; no
+            error control: cheap and smooth in the parameters, for fits whose contact is
+            soft enough for the grid; ``rtol``, ``atol`` and ``max_steps`` are unused).
+        adjoint: A diffrax adjoint; ``diffrax.ForwardMode()`` for forward-mode
+            derivatives (``jax.jvp``/``jacfwd``); reverse mode by default.
     """
     import diffrax  # here: importing the terrain package does not load diffrax
 
+    if fixed_step:  # the steps are the output times: save them, not an interpolation
+        controller, dt0 = diffrax.ConstantStepSize(), (t_out[-1] - t_out[0]) / (len(t_out) - 1)
+        saveat, max_steps = diffrax.SaveAt(t0=True, steps=True), len(t_out) - 1
+    else:
+        controller = diffrax.PIDController(rtol=rtol, atol=atol, dtmax=inputs.dt)
+        dt0, saveat = inputs.dt / 4, diffrax.SaveAt(ts=t_out)
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(_vector_field),
         diffrax.Tsit5() if solver is None else solver,
         t0=t_out[0],
         t1=t_out[-1],
-        dt0=inputs.dt / 4,
+        dt0=dt0,
         y0=y0,
         args=(modes, contact, inputs),
-        saveat=diffrax.SaveAt(ts=t_out),
-        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol, dtmax=inputs.dt),
+        saveat=saveat,
+        stepsize_controller=controller,
         max_steps=max_steps,
+        **({} if adjoint is None else {"adjoint": adjoint}),
     )
     ys = sol.ys
     now = jax.vmap(inputs.at)(t_out).T
