@@ -165,7 +165,7 @@ def draw_backbones(summary: dict, path: Path) -> None:
                 ax.plot(np.asarray(b["amplitude_m"]) * 1e3, b[key], "-", color=color,
                         label=row["file"][:14] if key == "f_hz" else None)  # fmt: skip
         terms = ", ".join(summary[length].get("terms", []))
-        axes[0, j].set_title(f"{length}: backbone ({terms}) over 8-period windows")
+        axes[0, j].set_title(f"{length}: fit ({terms}), points: windows", fontsize=9)
         axes[1, j].set_xlabel("mode 1 tip amplitude a (mm)")
         axes[0, j].set_ylabel("f(a) (Hz)")
         axes[1, j].set_ylabel("zeta(a)")
@@ -203,9 +203,6 @@ def main(argv=None) -> int:
                     help="keep every STRIDE-th sample (the beam rings at 6-16 Hz, sampled at "
                          "about 4 kHz: a stride of 4 still gives 60 samples a period)")  # fmt: skip
     args = ap.parse_args(argv)
-    if not args.data.exists():
-        print(f"no data at {args.data}", file=sys.stderr)
-        return 2
     terms = "auto" if args.terms == ["auto"] else tuple(args.terms)
     if args.from_json:
         summary = {}
@@ -213,6 +210,9 @@ def main(argv=None) -> int:
             summary.update(json.loads(f.read_text()))
         draw_backbones(dict(sorted(summary.items())), args.figure)
         return 0
+    if not args.data.exists():
+        print(f"no data at {args.data}", file=sys.stderr)
+        return 2
     summary = {}
     for length_cm in args.lengths:
         record = beam_record(length_cm)

@@ -279,3 +279,22 @@ def test_linear_pluck_is_not_marked_amplitude_dependent():
         assert "amplitude-dependent" not in lin.checks, lin.diagnostics["amplitude_test"]
         assert lin.status == "ok"
         assert abs(lin.params["zeta"]["value"] - truth["zeta"]) < 4 * lin.params["zeta"]["std"]
+
+
+@pytest.mark.slow
+def test_term_selection_drops_what_the_data_do_not_need():
+    """A SciPy pluck with velocity-squared damping only (ζ 1.25× at release, no stiffness
+    term): from quadratic + cubic + kappa, the information criterion keeps the damping and
+    drops both stiffness terms, and the chosen fit recovers ζ₀ and c within 3σ."""
+    from whiskerid.fit import calibrate_nonlinear_selected
+
+    record, obs, truth = _pluck(rate=200.0, rise=0.0, zq=0.25, seed=4)
+    lin = calibrate(record, obs, n_modes=1)
+    nl = calibrate_nonlinear_selected(lin, [obs], candidates=("quadratic", "cubic", "kappa"))
+    sel = nl.diagnostics["term_selection"]
+    assert sel["chosen"] == ["quadratic"], sel
+    assert sel["needed"]
+    assert [s["dropped"] for s in sel["steps"]][:2] in (["cubic", "kappa"], ["kappa", "cubic"])
+    for name in ("zeta", "quadratic_per_m"):
+        p = nl.params[name]
+        assert abs(p["value"] - truth[name]) < 3 * p["std"], (name, p, truth[name])
