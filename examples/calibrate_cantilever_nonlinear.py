@@ -12,6 +12,7 @@ one length are fitted jointly and the record saved as
 ``fits/cantilever-aluminium-<L>cm-nonlinear.toml``, with a plot.
 
     .venv/bin/python examples/calibrate_cantilever_nonlinear.py [--lengths 30 50] [--stride 4]
+        [--terms kappa quadratic cubic | auto] [--json-out r.json] [--figure f.png]
 """
 
 import argparse
@@ -28,6 +29,7 @@ import itertools
 from calibrate_cantilever import ROOT, beam_record, observation
 
 import whiskerid as wi
+from whiskerid.model._nonlinear import COEFFICIENTS
 
 
 def near_f1_share(o, model_y, f1_hz: float) -> float:
@@ -38,6 +40,32 @@ def near_f1_share(o, model_y, f1_hz: float) -> float:
     p = np.abs(np.fft.rfft(ru - ru.mean())) ** 2
     f = np.fft.rfftfreq(ru.size, dt)
     return float(p[np.abs(f - f1_hz) <= 1.0].sum() / max(p.sum(), 1e-300))
+
+
+def residual_spectrum(
+    o,
+    model_y,
+    bands=((0.0, 5.0), (5.0, 14.0), (14.0, 19.0), (19.0, 40.0), (40.0, 100.0), (100.0, 1e9)),
+) -> dict:
+    """The residual's variance share per frequency band (Hz; uniformly resampled) and its
+    three strongest lines: where the misfit lives."""
+    r = o.y - model_y
+    dt = float(np.median(np.diff(o.t)))
+    ru = np.interp(o.t[0] + dt * np.arange(o.t.size), o.t, r)
+    p = np.abs(np.fft.rfft((ru - ru.mean()) * np.hanning(ru.size))) ** 2
+    f = np.fft.rfftfreq(ru.size, dt)
+    top = np.argsort(p)[::-1]
+    lines = []
+    for i in top:
+        if all(abs(f[i] - g) > 0.5 for g, _ in lines):
+            lines.append((float(f[i]), float(p[i] / p.sum())))
+        if len(lines) == 3:
+            break
+    return {
+        "band_share": {f"{lo:g}-{hi:g} Hz": float(p[(f >= lo) & (f < hi)].sum() / p.sum())
+                       for lo, hi in bands},
+        "lines_hz_share": lines,
+    }  # fmt: skip
 
 
 def summary_of(cal, o) -> dict:
@@ -58,9 +86,11 @@ def summary_of(cal, o) -> dict:
         out["amplitude_message"] = test["message"]
     if hasattr(cal, "backbone"):
         b = cal.backbone
-        for k in ("gamma_per_m2", "quadratic_per_m", "coulomb_m_s2"):
+        for k in COEFFICIENTS:
             if k in p:
                 out[k] = [p[k]["value"], p[k]["std"]]
+        out["backbone"] = b
+        out["residual_spectrum"] = residual_spectrum(o, cal.curves[0][2])
         out["backbone_ends"] = {
             "amplitude_m": [b["amplitude_m"][0], b["amplitude_m"][-1]],
             "f_hz": [b["f_hz"][0], b["f_hz"][-1]],
@@ -112,6 +142,43 @@ def spread(values, stds) -> dict:
     }
 
 
+def draw_backbones(summary: dict, path: Path) -> None:
+    """f(a) and ζ(a) per beam length: every recording's fitted backbone (lines) over its
+    short-window damped-sine fits (points), amplitude as mode 1's tip deflection."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    lengths = list(summary)
+    fig, axes = plt.subplots(2, len(lengths), figsize=(5.2 * len(lengths), 6.4), squeeze=False)
+    for j, length in enumerate(lengths):
+        for i, row in enumerate(summary[length]["recordings"]):
+            b = row["nonlinear"].get("backbone")
+            if not b:
+                continue
+            color = f"C{i}"
+            w = b["windows"]
+            for ax, key, wkey in ((axes[0, j], "f_hz", "f_hz"), (axes[1, j], "zeta", "zeta")):
+                ax.plot(np.asarray(w["amplitude_m"]) * 1e3, w[wkey], ".", ms=3, color=color,
+                        alpha=0.5)  # fmt: skip
+                ax.plot(np.asarray(b["amplitude_m"]) * 1e3, b[key], "-", color=color,
+                        label=row["file"][:14] if key == "f_hz" else None)  # fmt: skip
+        terms = ", ".join(summary[length].get("terms", []))
+        axes[0, j].set_title(f"{length}: fit ({terms}), points: windows", fontsize=9)
+        axes[1, j].set_xlabel("mode 1 tip amplitude a (mm)")
+        axes[0, j].set_ylabel("f(a) (Hz)")
+        axes[1, j].set_ylabel("zeta(a)")
+        for ax in axes[:, j]:
+            ax.set_xscale("log")
+            ax.grid(alpha=0.3)
+        axes[0, j].legend(fontsize=7)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=ROOT.parent / "shared" / "data" / "cantilever")
@@ -119,10 +186,30 @@ def main(argv=None) -> int:
     ap.add_argument("--fits", type=Path, default=ROOT / "fits")
     ap.add_argument("--lengths", type=int, nargs="+", default=[30, 50])
     ap.add_argument("--no-joint", action="store_true", help="skip the joint fits")
+    ap.add_argument(
+        "--terms",
+        nargs="+",
+        default=["kappa", "quadratic", "cubic"],
+        help="nonlinear terms (or 'auto': chosen by BIC, several fits each)",
+    )
+    ap.add_argument("--json-out", type=Path, help="also write the summary here")
+    ap.add_argument("--figure", type=Path, help="draw f(a), zeta(a) against short windows here")
+    ap.add_argument(
+        "--from-json",
+        type=Path,
+        help="draw --figure from a summary written by --json-out (no fits)",
+    )
     ap.add_argument("--stride", type=int, default=1,
                     help="keep every STRIDE-th sample (the beam rings at 6-16 Hz, sampled at "
                          "about 4 kHz: a stride of 4 still gives 60 samples a period)")  # fmt: skip
     args = ap.parse_args(argv)
+    terms = "auto" if args.terms == ["auto"] else tuple(args.terms)
+    if args.from_json:
+        summary = {}
+        for f in args.from_json.glob("*.json") if args.from_json.is_dir() else [args.from_json]:
+            summary.update(json.loads(f.read_text()))
+        draw_backbones(dict(sorted(summary.items())), args.figure)
+        return 0
     if not args.data.exists():
         print(f"no data at {args.data}", file=sys.stderr)
         return 2
@@ -134,13 +221,13 @@ def main(argv=None) -> int:
         rows = []
         for o in obs:
             lin = wi.calibrate(record, o, n_modes=1)
-            nl = wi.calibrate(record, o, n_modes=1, model="nonlinear")
+            nl = wi.calibrate(record, o, n_modes=1, model="nonlinear", nl_terms=terms)
             rows.append({"file": o.name, "linear": summary_of(lin, o),
                          "nonlinear": summary_of(nl, o)})  # fmt: skip
             print(f"{length_cm} cm {o.name}: linear {lin.status} zeta {rows[-1]['linear']['zeta']}"
                   f" | nonlinear {nl.status} f0 {rows[-1]['nonlinear']['f1_hz']} zeta0 "
                   f"{rows[-1]['nonlinear']['zeta']}", file=sys.stderr)  # fmt: skip
-        out = {"recordings": rows}
+        out = {"recordings": rows, "terms": list(terms) if terms != "auto" else ["auto"]}
         for model in ("linear", "nonlinear"):
             out[f"{model}_repeats"] = {
                 "f1_hz": spread([r[model]["f1_hz"][0] for r in rows],
@@ -149,7 +236,7 @@ def main(argv=None) -> int:
                                [r[model]["zeta"][1] for r in rows]),
             }  # fmt: skip
         if not args.no_joint:
-            joint = wi.calibrate(record, obs, n_modes=1, model="nonlinear")
+            joint = wi.calibrate(record, obs, n_modes=1, model="nonlinear", nl_terms=terms)
             for f in joint.record.extra["fit"]["data_files"]:
                 f["path"] = os.path.relpath(f["path"], ROOT)
             name = f"{record.name}-nonlinear"
@@ -166,6 +253,10 @@ def main(argv=None) -> int:
                 "lag1_autocorr": joint.diagnostics["lag1_autocorr"],
             }
         summary[f"{length_cm}cm"] = out
+    if args.figure:
+        draw_backbones(summary, args.figure)
+    if args.json_out:
+        args.json_out.write_text(json.dumps(summary, indent=1))
     print(json.dumps(summary, indent=1))
     return 0
 

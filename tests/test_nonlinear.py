@@ -23,14 +23,14 @@ F0, Z0, A0 = 38.0, 0.02, 2e-3
 W0 = 2 * np.pi * F0
 
 
-def scipy_decay(t, gamma=0.0, c=0.0, friction=0.0, u0=A0, v0=0.0, zeta0=Z0, f0=F0):
+def scipy_decay(t, gamma=0.0, c=0.0, friction=0.0, u0=A0, v0=0.0, zeta0=Z0, f0=F0, kappa=0.0):
     """u(t) by SciPy, restarted at each velocity zero (exact sign of the friction)."""
     w0 = 2 * np.pi * f0
 
     def rhs(s, y, sgn):
         u, v = y
-        return [v, -(2 * zeta0 * w0 * v + w0**2 * (u + gamma * u**3) + c * abs(v) * v
-                     + friction * sgn)]  # fmt: skip
+        return [v, -(2 * zeta0 * w0 * v + w0**2 * (u + kappa * u * abs(u) + gamma * u**3)
+                     + c * abs(v) * v + friction * sgn)]  # fmt: skip
 
     def turn(s, y, sgn):
         return y[1]
@@ -49,7 +49,7 @@ def scipy_decay(t, gamma=0.0, c=0.0, friction=0.0, u0=A0, v0=0.0, zeta0=Z0, f0=F
         if sol.status != 1:
             break
         y[1] = 0.0
-        if abs(w0**2 * (y[0] + gamma * y[0] ** 3)) <= friction:
+        if abs(w0**2 * (y[0] + kappa * y[0] * abs(y[0]) + gamma * y[0] ** 3)) <= friction:
             out[t > s0] = y[0]
             break
         sgn = -sgn
@@ -95,6 +95,66 @@ def test_coulomb_slow_flow_against_scipy_and_exact_decrement():
     t = np.arange(0, 1.5, 1 / 200)
     ref = scipy_decay(t, friction=friction, v0=float(m.decay_rate(A0)))
     assert np.max(np.abs(np.asarray(slow_flow_decay(m, t, A0)) - ref)) < 1e-2 * A0
+
+
+def test_amplitude_linear_stiffness_against_scipy_and_exact_period():
+    """κu|u| softening (−1 % at A0 by harmonic balance) with viscous damping: diffrax and
+    the slow flow against SciPy; the backbone 4κa/(3π) against the exact period of the
+    undamped oscillator (energy quadrature, independent of harmonic balance)."""
+    from scipy.integrate import quad
+
+    shift = -0.01
+    kappa = shift * 3 * np.pi / (4 * A0)
+    m = NonlinearMode(F0, Z0, kappa_per_m=kappa)
+    assert float(m.frequency_hz(A0)) == pytest.approx(F0 * (1 + shift), rel=1e-12)
+    t = np.arange(0, 0.6, 1 / 200)
+    v0 = float(m.decay_rate(A0))
+    ref = scipy_decay(t, kappa=kappa, v0=v0)
+    u, _ = nonlinear_response(m, t, A0, v0)
+    np.testing.assert_allclose(u, ref, atol=1e-7 * A0)
+    err = np.max(np.abs(np.asarray(slow_flow_decay(m, t, A0)) - ref))
+    lin = np.asarray(slow_flow_decay(NonlinearMode(F0, Z0), t, A0))
+    assert err < 5e-3 * A0 and np.max(np.abs(lin - ref)) > 10 * err
+
+    def period(a):  # T = 4∫₀ᵃ du/√(2(V(a) − V(u))), V = ω₀²(u²/2 + κ|u|³/3), u ≥ 0 half
+        def energy(u):
+            return W0**2 * (u**2 / 2 + kappa * u**3 / 3)
+
+        # u = a sin s removes the endpoint singularity
+        return 4 * quad(lambda s: a * np.cos(s) / np.sqrt(2 * (energy(a) - energy(a * np.sin(s)))),
+                        0, np.pi / 2, epsabs=0, epsrel=1e-13)[0]  # fmt: skip
+
+    for a in (0.25 * A0, A0, 2 * A0):
+        exact = 1 / period(a)
+        hb = float(m.frequency_hz(a))
+        first = abs(hb / F0 - 1)
+        # first-order harmonic balance: error of order (κa)², far below the shift itself
+        assert abs(exact / hb - 1) < first**2
+        assert abs(exact / F0 - 1) == pytest.approx(first, rel=0.02)
+
+
+def test_coulomb_waveform_and_stop_are_the_exact_free_response():
+    """Dry friction only: the slow flow's a(t)cos ψ plus (F/ω₀²)·friction_waveform(ψ), held
+    from the turn where friction stops it (friction_stop), is the exact piecewise solution
+    (SciPy, restarted at each turn) to rounding, through the stop and the hold; the averaged
+    a cos ψ alone misses by about F/ω₀² (the square wave's harmonics)."""
+    from whiskerid.fit._nonlinear import friction_stop, friction_waveform
+
+    friction = 0.004 * np.pi * W0**2 * A0 / 2
+    m = NonlinearMode(F0, 0.0, coulomb_m_s2=friction)
+    t = np.arange(0, 1.3, 1 / 3000)
+    ref = scipy_decay(t, friction=friction, zeta0=0.0)
+    stop = t[np.flatnonzero(np.diff(ref))[-1] + 1]  # the last sample that moved
+    assert 0.5 < stop < 1.2  # the recording holds the stop and a stretch after it
+    a, phi = slow_flow(m, jnp.asarray(t), A0)
+    a, held, hold = (np.asarray(v) for v in friction_stop(m, jnp.asarray(t), a, phi))
+    averaged = a * np.cos(phi)
+    exact = averaged + friction / W0**2 * np.asarray(friction_waveform(phi))
+    exact = np.where(held, hold, exact)
+    assert t[np.argmax(held)] == pytest.approx(stop, abs=1.5 / 3000)
+    assert np.max(np.abs(exact - ref)) < 1e-6 * A0
+    moving = t < stop - 1 / F0
+    assert np.max(np.abs((averaged - ref)[moving])) > 0.9 * friction / W0**2
 
 
 @pytest.mark.slow
@@ -219,3 +279,22 @@ def test_linear_pluck_is_not_marked_amplitude_dependent():
         assert "amplitude-dependent" not in lin.checks, lin.diagnostics["amplitude_test"]
         assert lin.status == "ok"
         assert abs(lin.params["zeta"]["value"] - truth["zeta"]) < 4 * lin.params["zeta"]["std"]
+
+
+@pytest.mark.slow
+def test_term_selection_drops_what_the_data_do_not_need():
+    """A SciPy pluck with velocity-squared damping only (ζ 1.25× at release, no stiffness
+    term): from quadratic + cubic + kappa, the information criterion keeps the damping and
+    drops both stiffness terms, and the chosen fit recovers ζ₀ and c within 3σ."""
+    from whiskerid.fit import calibrate_nonlinear_selected
+
+    record, obs, truth = _pluck(rate=200.0, rise=0.0, zq=0.25, seed=4)
+    lin = calibrate(record, obs, n_modes=1)
+    nl = calibrate_nonlinear_selected(lin, [obs], candidates=("quadratic", "cubic", "kappa"))
+    sel = nl.diagnostics["term_selection"]
+    assert sel["chosen"] == ["quadratic"], sel
+    assert sel["needed"]
+    assert [s["dropped"] for s in sel["steps"]][:2] in (["cubic", "kappa"], ["kappa", "cubic"])
+    for name in ("zeta", "quadratic_per_m"):
+        p = nl.params[name]
+        assert abs(p["value"] - truth[name]) < 3 * p["std"], (name, p, truth[name])

@@ -35,6 +35,8 @@ from ._lsq import gradient_cosine as gradient_cosine
 from ._lsq import least_squares as least_squares
 from ._lsq import to_interval as to_interval
 from ._modulus import MODULUS_TOLERANCE as MODULUS_TOLERANCE
+from ._nl_select import calibrate_nonlinear_selected as calibrate_nonlinear_selected
+from ._nonlinear import ALL_TERMS as ALL_TERMS
 from ._nonlinear import NL_TERMS as NL_TERMS
 from ._nonlinear import NonlinearCalibration as NonlinearCalibration
 from ._nonlinear import NonlinearProblem as NonlinearProblem

@@ -12,11 +12,12 @@ Parameters are scaled by a reference amplitude ``a_ref`` (the largest starting a
 the recordings, from the linear fit), so that each is a small dimensionless number the data
 see directly:
 
-* ``g = 3γa_ref²/8``: relative frequency rise at ``a_ref``;
+* ``g = 3γa_ref²/8``: relative frequency rise at ``a_ref`` (cubic);
+* ``h = 4κa_ref/(3π)``: relative frequency change at ``a_ref`` linear in ``a`` (``kappa``);
 * ``ζ_v = 4c·a_ref/(3π)``: velocity-squared damping's ``ζ`` at ``a_ref``;
 * ``ζ_c = 2F/(πω₀²a_ref)``: friction's ``ζ`` at ``a_ref`` (it grows as ``a_ref/a``).
 
-At ``g = ζ_v = ζ_c = 0`` the model is the linear one exactly, so the linear optimum starts
+At ``g = h = ζ_v = ζ_c = 0`` the model is the linear one exactly, so the linear optimum starts
 the Levenberg–Marquardt fit of all parameters (optimistix). The covariance is the HAC
 (Newey–West) sandwich at the optimum, never below the white-noise ``s²(JᵀJ)⁻¹``: a first-
 order slow flow leaves small harmonics in the residuals, and real recordings leave more.
@@ -48,8 +49,14 @@ from ._observation import CalibrationError
 from ._problem import FitProblem, recording_design
 from ._short_windows import short_window_points
 
-#: The nonlinear terms, in the order of the parameter vector ``nl``.
+#: The nonlinear terms fitted by default, in the order of the parameter vector ``nl``.
 NL_TERMS = ("cubic", "quadratic", "coulomb")
+#: Every term: the defaults and ``kappa`` (``κu|u|``, a frequency shift linear in ``a``).
+ALL_TERMS = (*NL_TERMS, "kappa")
+#: Physical coefficient (as :class:`whiskerid.model.NonlinearMode` names it) of each term.
+COEFFICIENT_OF = {"cubic": "gamma_per_m2", "quadratic": "quadratic_per_m",
+                  "coulomb": "coulomb_m_s2", "kappa": "kappa_per_m"}  # fmt: skip
+_SCALED = {"cubic": "g", "quadratic": "zeta_v", "coulomb": "zeta_c", "kappa": "h"}
 #: Points of the reported backbone between the smallest and largest amplitudes.
 BACKBONE_POINTS = 9
 
@@ -60,7 +67,7 @@ class NonlinearProblem(eqx.Module):
     Attributes:
         base: The linear problem (recordings, whisker, weights).
         a_ref: Reference amplitude (m) that scales the nonlinear parameters.
-        terms: The nonlinear terms fitted (a subset of :data:`NL_TERMS`).
+        terms: The nonlinear terms fitted (a subset of :data:`ALL_TERMS`).
     """
 
     base: FitProblem
@@ -70,8 +77,8 @@ class NonlinearProblem(eqx.Module):
     def __check_init__(self):
         if jnp.shape(self.a_ref) != ():
             raise ValueError("NonlinearProblem.a_ref must be a scalar")
-        if not self.terms or any(t not in NL_TERMS for t in self.terms):
-            raise ValueError(f"terms must be a non-empty subset of {NL_TERMS}")
+        if not self.terms or any(t not in ALL_TERMS for t in self.terms):
+            raise ValueError(f"terms must be a non-empty subset of {ALL_TERMS}")
 
     def zero_params(self) -> dict:
         """The linear problem's pytree plus ``nl`` (one entry per term)."""
@@ -88,11 +95,10 @@ class NonlinearProblem(eqx.Module):
         return ravel_pytree(self.zero_params())[1](flat)
 
     def scaled(self, params) -> dict[str, Array]:
-        """``g``, ``zeta_v``, ``zeta_c`` (zero for the terms not fitted)."""
-        out = {"g": 0.0, "zeta_v": 0.0, "zeta_c": 0.0}
-        keys = {"cubic": "g", "quadratic": "zeta_v", "coulomb": "zeta_c"}
+        """``g``, ``h``, ``zeta_v``, ``zeta_c`` (zero for the terms not fitted)."""
+        out = dict.fromkeys(_SCALED.values(), 0.0)
         for i, term in enumerate(self.terms):
-            out[keys[term]] = params["nl"][i]
+            out[_SCALED[term]] = params["nl"][i]
         return out
 
     def mode(self, params) -> NonlinearMode:
@@ -107,6 +113,7 @@ class NonlinearProblem(eqx.Module):
             gamma_per_m2=8 * s["g"] / (3 * a**2),
             quadratic_per_m=3 * jnp.pi * s["zeta_v"] / (4 * a),
             coulomb_m_s2=jnp.pi * w0**2 * s["zeta_c"] * a / 2,
+            kappa_per_m=3 * jnp.pi * s["h"] / (4 * a),
         )
 
     def design(self, params) -> list[tuple[Array, Array, Array]]:
@@ -121,18 +128,26 @@ class NonlinearProblem(eqx.Module):
             obs = _observed_per_metre(rec, mode, w)
             a0 = jnp.hypot(p["c"][2], p["c"][2 + nm]) / (jnp.abs(rec.scale) * obs)
             a, phi = slow_flow(mode, rec.t, a0)
+            if "coulomb" in self.terms:
+                psi = phi - jnp.arctan2(p["c"][2 + nm], p["c"][2])
+                a, held, _ = friction_stop(mode, rec.t, a, psi)
             env = a / jnp.maximum(a0, 1e-300)
             if rec.observable == "acceleration":
-                env = env * (mode.omega(a) / mode.omega(a0)) ** 2
+                env = env * (mode.omega(jnp.maximum(a, 0.0)) / mode.omega(a0)) ** 2
             c, s = env * jnp.cos(phi), env * jnp.sin(phi)
             if rec.avg_offsets is not None:
                 wd = mode.omega(a) * jnp.sqrt(1 - mode.zeta0**2)
                 re, im = conversion_average(mode.zeta0 * mode.omega0 + 0 * wd, wd, rec.avg_offsets)
                 c, s = c * re - s * im, s * re + c * im
             D = D.at[:, 2].set(c).at[:, 2 + nm].set(s)
-            if "coulomb" in self.terms and rec.observable != "acceleration":
-                g = g + _friction_offset(rec, p["c"][2], p["c"][2 + nm], phi, a, mode, obs)
-            out.append((D, g, a))
+            if "coulomb" in self.terms:
+                g = g + _friction_offset(rec, psi, held, mode, obs)
+                # the held level is profiled out (a free constant after the stop): the stop's
+                # turn is discrete, and one turn more or less would move the exact level by
+                # 2F/ω₀², a step over the whole rest of the recording (a rugged cost)
+                level = jnp.sum(jnp.where(held, rec.y - D @ p["c"] - g, 0.0))
+                g = g + jnp.where(held, level / jnp.maximum(jnp.sum(held), 1), 0.0)
+            out.append((D, g, jnp.maximum(a, 0.0)))
         return out
 
     def residuals(self, params) -> Array:
@@ -151,33 +166,89 @@ class NonlinearProblem(eqx.Module):
         coefficients, and the backbone ``f(a)``, ``ζ(a)`` at ``amplitudes`` (m)."""
         out = dict(self.base.reported(params))
         m = self.mode(params)
-        names = {"cubic": "gamma_per_m2", "quadratic": "quadratic_per_m"}
-        names["coulomb"] = "coulomb_m_s2"
         for term in self.terms:
-            out[names[term]] = getattr(m, names[term])
+            out[COEFFICIENT_OF[term]] = getattr(m, COEFFICIENT_OF[term])
         for i in range(amplitudes.shape[0]):
             out[f"backbone_f_{i}"] = m.frequency_hz(amplitudes[i])
             out[f"backbone_zeta_{i}"] = m.zeta(amplitudes[i])
         return out
 
 
-def _friction_offset(rec, c_cos, c_sin, phi, a, mode, per_m):
-    """Dry friction's square wave in normalised observed units.
+def friction_waveform(psi: Array) -> Array:
+    """Dry friction's exact correction to ``a cos ψ`` per ``F/ω₀²``, one period of ``ψ``.
 
-    Each half-cycle oscillates about ``±F/ω₀²`` (the side the motion comes from), so the
-    deflection is ``a cos ψ + (F/ω₀²) sgn(sin ψ)`` with ``ψ`` the fitted mode-1 phase: a
-    component in quadrature (``4F/(πω₀²) sin ψ``) whose share grows as ``a`` falls, which the
-    averaged ``a cos φ`` alone would take for a drifting frequency. Its first two harmonics
-    are kept (the 5th is 1/5 of the 1st's 4F/(πω₀²)); an accelerometer does not see it
-    (``ü = −ω₀²(u ∓ F/ω₀²)``).
+    Between two turns of the velocity the mode is a cosine ``A_k cos ψ + d_k`` about a
+    centre ``d_k = (F/ω₀²) sgn(sin ψ)`` (the side it moves from), and each turn lowers
+    ``A_k`` by ``2F/ω₀²``: a staircase, which the slow flow's ``a(t)`` follows as a straight
+    line through its middles. The difference, ``(A_k − a)cos ψ = (F/ω₀²)(2θ/π − 1)cos ψ``
+    with ``θ = ψ mod π``, plus the centre, is the exact free response's departure from
+    ``a cos ψ``:
+
+        w(ψ) = sgn(sin ψ) + (2θ/π − 1) cos ψ,
+
+    continuous (and once differentiable) in ``ψ``, odd harmonics only; its first is
+    ``(3/π) sin ψ`` and its 3rd, 5th… are the square wave's, which a sampled recording well
+    above ``f₀`` sees.
     """
-    psi = phi - jnp.arctan2(c_sin, c_cos)
-    square = 4 / jnp.pi * (jnp.sin(psi) + jnp.sin(3 * psi) / 3)
-    # once friction holds the whisker it stays off-centre, on the side it last came from
-    last = jnp.maximum(jnp.sum(a > 0) - 1, 0)
-    square = jnp.where(a > 0, square, jnp.sign(jnp.sin(psi[last])))
+    theta = jnp.mod(psi, jnp.pi)
+    side = jnp.where(jnp.mod(psi, 2 * jnp.pi) < jnp.pi, 1.0, -1.0)  # sgn(sin ψ), at turns too
+    return side + (2 * theta / jnp.pi - 1) * jnp.cos(psi)
+
+
+def friction_stop(mode, t, a, psi):
+    """Where dry friction stops the decay, and where it holds the whisker.
+
+    The slow flow's envelope falls to 0 and stays (:func:`whiskerid.model.slow_flow`), but the
+    exact motion stops at a turn of the velocity, ``ψ = kπ``, the first one where the
+    restoring force no longer beats friction: ``|u| ≤ F/ω₀²``. At a turn the exact position is
+    ``a(t_k) cos kπ`` with ``a`` the averaged envelope continued straight through 0 (each half
+    cycle lowers it by ``2F/ω₀²``; continued below 0 it still gives the right turn, on the
+    side the whisker came from), and the whisker stays there.
+
+    Args:
+        mode: The mode (``F``, ``ω₀``).
+        t: Sample times (s).
+        a: The slow flow's envelope (m), clamped at 0.
+        psi: The deflection's phase ``ψ`` at ``t`` (turns at multiples of π).
+
+    Returns:
+        ``(a, held, hold)``: the envelope continued to the stop and 0 after it, the mask of
+        held samples, and the held deflection (m at the tip; 0 before the stop).
+    """
+    n = t.size
+    alive = a > 0
+    last = jnp.maximum(jnp.sum(alive) - 1, 0)
+    # near 0 friction dominates: the envelope falls on a straight line
+    a = jnp.where(alive, a, a[last] + mode.decay_rate(a[last]) * (t - t[last]))
+    k = jnp.floor(psi / jnp.pi)
+    frac = (k[1:] * jnp.pi - psi[:-1]) / jnp.where(psi[1:] > psi[:-1], psi[1:] - psi[:-1], 1.0)
+    a_turn = jnp.concatenate([a[:1], a[:-1] + frac * (a[1:] - a[:-1])])
+    turned = jnp.concatenate([jnp.zeros(1, bool), k[1:] > k[:-1]])
+    stops = turned & (jnp.abs(a_turn) <= mode.coulomb_m_s2 / mode.omega0**2)
+    first = jnp.min(jnp.where(stops, jnp.arange(n), n))
+    held = jnp.arange(n) >= first
+    at = jnp.minimum(first, n - 1)
+    hold = jnp.where(held, jnp.cos(k[at] * jnp.pi) * a_turn[at], 0.0)
+    return jnp.where(held, 0.0, a), held, hold
+
+
+def _friction_offset(rec, psi, held, mode, per_m):
+    """Dry friction's departure from the averaged ``a cos ψ`` in normalised observed units
+    (:func:`friction_waveform`, times ``F/ω₀²`` at the tip), 0 once held
+    (:func:`friction_stop`; the held level is fitted).
+
+    A deflection sensor sees all of it; an accelerometer only the staircase part
+    (``ü = −ω₀²(u − d_k)``: the centre is not accelerated), ``(2θ/π − 1)cos ψ`` in the
+    observed phase (the sign flips with ``ü``'s half-period shift and the odd symmetry), and
+    nothing once the whisker is held.
+    """
     offset = mode.coulomb_m_s2 / mode.omega0**2  # m at the tip
-    return jnp.abs(rec.scale) * per_m * offset * square
+    if rec.observable == "acceleration":
+        theta = jnp.mod(psi, jnp.pi)
+        wave = jnp.where(held, 0.0, offset * (2 * theta / jnp.pi - 1) * jnp.cos(psi))
+    else:
+        wave = jnp.where(held, 0.0, offset * friction_waveform(psi))
+    return jnp.abs(rec.scale) * per_m * wave
 
 
 def _observed_per_metre(rec, mode, whisker):
@@ -281,13 +352,20 @@ def calibrate_nonlinear(
     Args:
         linear: The linear :class:`Calibration` of the same record and recordings.
         observations: The recordings (free decays only).
-        terms: Nonlinear terms to fit (a subset of :data:`NL_TERMS`).
+        terms: Nonlinear terms to fit (a subset of :data:`ALL_TERMS`), or ``"auto"``: every
+            term, then the ones the data do not need dropped by an information criterion
+            (:func:`whiskerid.fit.calibrate_nonlinear_selected`).
         solver: As :func:`whiskerid.fit.calibrate`.
         max_steps: Solver step limit.
 
     Returns:
         A :class:`NonlinearCalibration`; never raises on a failed solve (see ``status``).
     """
+    if terms == "auto" or terms == ("auto",):
+        from ._nl_select import calibrate_nonlinear_selected
+
+        return calibrate_nonlinear_selected(linear, observations, solver=solver,
+                                            max_steps=max_steps)  # fmt: skip
     obs = list(observations)
     base = linear.problem
     if base is None or linear.optimum is None:
@@ -297,7 +375,7 @@ def calibrate_nonlinear(
             "the nonlinear model fits free decays only (no sine, base motion or static test); "
             "fit those with --model linear"
         )
-    terms = tuple(t for t in NL_TERMS if t in terms)
+    terms = tuple(t for t in ALL_TERMS if t in terms)
     nm = base.n_modes
     wl = base.whisker(linear.optimum)
     w0 = float(wl.omega_rad_s[0])
@@ -484,9 +562,7 @@ def _updated_record(cal: NonlinearCalibration):
     fit["nonlinear"] = {
         "f0_hz": p["f1_hz"]["value"],
         "zeta0": p["zeta"]["value"],
-        "gamma_per_m2": p.get("gamma_per_m2", {"value": 0.0})["value"],
-        "quadratic_per_m": p.get("quadratic_per_m", {"value": 0.0})["value"],
-        "coulomb_m_s2": p.get("coulomb_m_s2", {"value": 0.0})["value"],
+        **{k: p.get(k, {"value": 0.0})["value"] for k in COEFFICIENT_OF.values()},
         "amplitude": "mode 1 tip deflection (m)",
         "backbone": {k: v for k, v in cal.backbone.items() if k != "windows"},
     }

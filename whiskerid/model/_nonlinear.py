@@ -4,15 +4,20 @@ Real whiskers and beams are stiffer and lose energy differently at large amplitu
 frequency of a free decay drifts as it dies out and its damping ratio is not one number. One
 mode, its deflection ``u`` (m, at the point where it is read), obeys
 
-    u'' + 2ζ₀ω₀u' + ω₀²(u + γu³) + c|u'|u' + F sgn(u') = −b(t)
+    u'' + 2ζ₀ω₀u' + ω₀²(u + κu|u| + γu³) + c|u'|u' + F sgn(u') = −b(t)
 
 with ``ω₀ = 2πf₀`` the small-amplitude natural frequency, ``ζ₀`` its viscous damping ratio,
-``γ`` (1/m²) a cubic (Duffing) stiffness, ``c`` (1/m) a velocity-squared (aerodynamic or
-material) loss, ``F`` (m/s²) dry (Coulomb) friction and ``b`` the base acceleration.
+``κ`` (1/m) a stiffness change linear in the amplitude (the odd quadratic ``u|u|``: a
+clamp that slips a little, or a contact that closes, at every deflection), ``γ`` (1/m²) a
+cubic (Duffing) stiffness, ``c`` (1/m) a velocity-squared (aerodynamic or material) loss,
+``F`` (m/s²) dry (Coulomb) friction and ``b`` the base acceleration.
 
-**Harmonic balance.** With ``u ≈ a cos ψ`` the first-order backbone is
-``ω(a) = ω₀(1 + 3γa²/8)``. A loss term is replaced by the viscous damping that dissipates the
-same energy per cycle (equivalent linearisation):
+**Harmonic balance.** With ``u ≈ a cos ψ`` the restoring force's first harmonic is
+``ω₀²a(1 + 8κa/(3π) + 3γa²/4) cos ψ`` (``(1/π)∫cos²ψ|cos ψ|dψ = 8/(3π)`` over a period,
+``(1/π)∫cos⁴ψ dψ = 3/4``), so to first order the backbone is
+``ω(a) = ω₀(1 + 4κa/(3π) + 3γa²/8)``: a frequency shift linear in ``a`` (``κ``) or
+quadratic (``γ``); ``κ < 0`` softens. A loss term is replaced by the viscous damping that
+dissipates the same energy per cycle (equivalent linearisation):
 
 * velocity-squared: ``ζ_eq = 4c·a·ω/(3πω₀)`` (grows with ``a``);
 * Coulomb: ``ζ_eq = 2F/(πω₀²a)·(ω₀/ω)`` (grows as ``1/a``: it dominates late in a decay,
@@ -39,6 +44,9 @@ from jaxtyping import Array, ArrayLike, Float
 
 from .._custom_types import Scalar
 
+#: The stored nonlinear coefficients (tip amplitude), as :class:`NonlinearMode` names them.
+COEFFICIENTS = ("gamma_per_m2", "quadratic_per_m", "coulomb_m_s2", "kappa_per_m")
+
 
 def _scalar(x) -> Array:
     return jnp.asarray(x, dtype=float)
@@ -53,6 +61,7 @@ class NonlinearMode(eqx.Module):
         gamma_per_m2: Cubic stiffness ``γ`` (1/m²); > 0 stiffening, < 0 softening.
         quadratic_per_m: Velocity-squared damping ``c`` (1/m).
         coulomb_m_s2: Dry friction ``F`` (m/s², force per modal mass).
+        kappa_per_m: Amplitude-linear stiffness ``κ`` (1/m) of ``u|u|``; < 0 softening.
     """
 
     f0_hz: Scalar = eqx.field(converter=_scalar)
@@ -60,9 +69,11 @@ class NonlinearMode(eqx.Module):
     gamma_per_m2: Scalar = eqx.field(converter=_scalar, default=0.0)
     quadratic_per_m: Scalar = eqx.field(converter=_scalar, default=0.0)
     coulomb_m_s2: Scalar = eqx.field(converter=_scalar, default=0.0)
+    kappa_per_m: Scalar = eqx.field(converter=_scalar, default=0.0)
 
     def __check_init__(self):
-        for name in ("f0_hz", "zeta0", "gamma_per_m2", "quadratic_per_m", "coulomb_m_s2"):
+        for name in ("f0_hz", "zeta0", "gamma_per_m2", "quadratic_per_m", "coulomb_m_s2",
+                     "kappa_per_m"):  # fmt: skip
             if jnp.shape(getattr(self, name)) != ():
                 raise ValueError(f"NonlinearMode.{name} must be a scalar")
 
@@ -72,9 +83,10 @@ class NonlinearMode(eqx.Module):
         return 2 * jnp.pi * self.f0_hz
 
     def omega(self, a: ArrayLike) -> Array:
-        """Backbone ``ω(a) = ω₀(1 + 3γa²/8)`` (rad/s) at amplitude ``a`` (m)."""
+        """Backbone ``ω(a) = ω₀(1 + 4κa/(3π) + 3γa²/8)`` (rad/s) at amplitude ``a`` (m)."""
         a = jnp.asarray(a)
-        return self.omega0 * (1.0 + 0.375 * self.gamma_per_m2 * a**2)
+        shift = 4 * self.kappa_per_m * a / (3 * jnp.pi) + 0.375 * self.gamma_per_m2 * a**2
+        return self.omega0 * (1.0 + shift)
 
     def frequency_hz(self, a: ArrayLike) -> Array:
         """Backbone frequency ``f(a)`` (Hz), undamped."""
@@ -191,7 +203,7 @@ def nonlinear_response(
         u, v = y
         acc = -(
             2 * mode.zeta0 * w0 * v
-            + w0**2 * (u + mode.gamma_per_m2 * u**3)
+            + w0**2 * (u + mode.kappa_per_m * u * jnp.abs(u) + mode.gamma_per_m2 * u**3)
             + mode.quadratic_per_m * jnp.abs(v) * v
             + mode.coulomb_m_s2 * jnp.tanh(v / friction_velocity_m_s)
         )
@@ -215,19 +227,19 @@ def nonlinear_response(
 
 def nonlinear_coefficients(record) -> dict | None:
     """The nonlinear coefficients a calibration stored in ``record`` (``[fit.nonlinear]``:
-    ``gamma_per_m2``, ``quadratic_per_m``, ``coulomb_m_s2`` for mode 1's tip amplitude), or
-    None for a linear record."""
+    ``gamma_per_m2``, ``quadratic_per_m``, ``coulomb_m_s2``, ``kappa_per_m`` for mode 1's tip
+    amplitude; a term not stored is 0), or None for a linear record."""
     nl = (record.extra.get("fit") or {}).get("nonlinear")
     if not nl:
         return None
-    return {k: float(nl.get(k, 0.0)) for k in ("gamma_per_m2", "quadratic_per_m", "coulomb_m_s2")}
+    return {k: float(nl.get(k, 0.0)) for k in COEFFICIENTS}
 
 
 def nonlinear_pluck_state(whisker, t: Float[Array, " n"], q0, coefficients: dict):
     """A pluck's modal state with mode 1 nonlinear (the ODE by diffrax), the others linear.
 
     The coefficients are for mode 1's *tip* deflection ``u = φ₁(l) q₁``; in the modal
-    coordinate they become ``γφ₁(l)²``, ``c|φ₁(l)|`` and ``F/|φ₁(l)|``.
+    coordinate they become ``γφ₁(l)²``, ``κ|φ₁(l)|``, ``c|φ₁(l)|`` and ``F/|φ₁(l)|``.
 
     Args:
         whisker: The whisker (mode 1's ``f₀`` and ``ζ₀`` are its first mode's).
@@ -249,12 +261,13 @@ def nonlinear_pluck_state(whisker, t: Float[Array, " n"], q0, coefficients: dict
         gamma_per_m2=coefficients["gamma_per_m2"] * phi**2,
         quadratic_per_m=coefficients["quadratic_per_m"] * phi,
         coulomb_m_s2=coefficients["coulomb_m_s2"] / phi,
+        kappa_per_m=coefficients.get("kappa_per_m", 0.0) * phi,
     )
     u, v = nonlinear_response(mode, t, q0[0], 0.0)
     w0 = mode.omega0
     acc = -(
         2 * mode.zeta0 * w0 * v
-        + w0**2 * (u + mode.gamma_per_m2 * u**3)
+        + w0**2 * (u + mode.kappa_per_m * u * jnp.abs(u) + mode.gamma_per_m2 * u**3)
         + mode.quadratic_per_m * jnp.abs(v) * v
         + mode.coulomb_m_s2 * jnp.tanh(v / 1e-6)
     )
