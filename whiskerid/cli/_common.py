@@ -325,7 +325,7 @@ class InterruptPolicy:
             # raised there would land in native code being torn down (a crash): the process
             # ends now, with the first signal's status.
             if self.keep:
-                _exit_now(self.exit_status or 128 + int(signum))
+                exit_now(self.exit_status or 128 + int(signum))
             return
         if self._in_hook:  # inside the unraisable hook: raised here, it would be lost
             self._again()
@@ -414,12 +414,15 @@ class InterruptPolicy:
 _POLICY = InterruptPolicy()
 
 
-def _exit_now(status: int) -> None:
-    """End the process at once (a second signal in the teardown), stderr flushed if it can."""
-    try:
-        sys.stderr.flush()
-    except BaseException:  # a flush interrupted mid-write: the process ends regardless
-        pass
+def exit_now(status: int) -> None:
+    """End the process now, stdout and stderr flushed where they can be (the command's files
+    are already closed; a stream closed by its reader, or caught mid-write by a signal in the
+    teardown, is left as it is)."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except BaseException:  # a closed pipe, or a flush interrupted mid-write
+            pass
     os._exit(status)
 
 

@@ -37,6 +37,7 @@ from ._common import (
     CommandError,
     Interrupted,
     add_quiet_everywhere,
+    exit_now,
     interrupts,
     json_safe,
     one_line,
@@ -131,7 +132,7 @@ def main(argv: list[str] | None = None) -> int:
             # Stopped on a signal, its outputs closed and the line said: the interpreter's
             # teardown (JAX's, XLA's) is where a crash or another signal would land.
             gc.collect()  # files a traceback kept open are closed (and flushed) first
-            _exit_now(status)
+            exit_now(status)
         return status
     except BrokenPipeError:
         # The reader left (``| head``): what it read is all it wanted. No traceback, and
@@ -179,7 +180,7 @@ def _run(args, start: float, *, fast_exit: bool) -> int:
             print(json.dumps(json_safe(result), indent=2, allow_nan=False))
             sys.stdout.flush()  # here, not at exit: a closed pipe is reported in main
     if fast_exit and name in _FAST_EXIT:
-        _exit_now(0)
+        exit_now(0)
     return 0
 
 
@@ -190,16 +191,6 @@ def _interrupted(args, policy, err: BaseException) -> int:
     status = policy.status(err)  # before the line: a signal after it exits with this status
     print(f"whiskerid {args.command}: {policy.report(err)}", file=sys.stderr)
     return status
-
-
-def _exit_now(status: int) -> None:
-    """End the process now, its output flushed (the command's files are already closed)."""
-    try:
-        sys.stdout.flush()
-        sys.stderr.flush()
-    except (OSError, ValueError):  # a closed pipe: nothing more can be said
-        pass
-    os._exit(status)
 
 
 if __name__ == "__main__":
