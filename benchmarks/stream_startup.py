@@ -59,8 +59,10 @@ def one_run(argv: list[str]) -> dict:
     terrain: list[float] = []
     peak = [0.0, 0.0]
 
+    done = threading.Event()
+
     def watch():
-        while proc.poll() is None:
+        while not done.is_set():  # not proc.poll(): it would reap the process before wait4
             peak[0] = max(peak[0], peak_rss_mib(proc.pid) or 0.0)
             kids = sum(peak_rss_mib(c) or 0.0 for c in children(proc.pid))
             peak[1] = max(peak[1], kids)
@@ -79,6 +81,7 @@ def one_run(argv: list[str]) -> dict:
                 terrain.append(now)
     _, status, usage = os.wait4(proc.pid, 0)  # its CPU, with its sampling process's
     proc.returncode = os.waitstatus_to_exitcode(status)
+    done.set()
     watcher.join()
     return {
         "first_label_s": round(first[0], 3) if first else None,
