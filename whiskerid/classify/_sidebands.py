@@ -39,7 +39,6 @@ symmetric and at least half of the test windows show it.
 """
 
 import numpy as np
-from scipy import stats
 
 #: Correlation of half-overlapping Hann segments (Welch 1967).
 _HANN_OVERLAP_RHO = 0.167
@@ -72,6 +71,8 @@ def floor_ratio(power: np.ndarray, dof: float, floor_bins: int) -> np.ndarray:
     idx = np.arange(n)[:, None] + offsets[None, :]
     near = np.where((idx >= 1) & (idx < n), power[np.clip(idx, 0, n - 1)], np.nan)
     median = np.nanmedian(near, axis=1)
+    from scipy import stats  # here, not at import: it costs a stream's start 0.5-4 s
+
     scale = stats.chi2.median(dof) / dof
     return power / np.maximum(median / scale, 1e-300)
 
@@ -88,6 +89,8 @@ def _side(ratio, power, j):
 
 
 def _tail(s: float, dof: float) -> float:
+    from scipy import stats
+
     single = stats.chi2.sf(s * dof, dof)
     return float(1 - (1 - single) ** 3)
 
@@ -184,4 +187,6 @@ def sideband_test(powers: np.ndarray, df_hz: float, carrier_hz: float, dof: floa
 
 def _fisher(ps) -> float:
     ps = np.clip(np.asarray(ps, dtype=float), 1e-300, 1.0)
+    from scipy import stats
+
     return float(stats.chi2.sf(-2 * np.sum(np.log(ps)), 2 * ps.size)) if ps.size else 1.0

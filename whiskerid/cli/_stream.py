@@ -6,6 +6,7 @@ import json
 import math
 import sys
 import tempfile
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -174,9 +175,10 @@ def _stream(args, policy) -> dict:
     except ValueError as e:
         raise CommandError(str(e)) from None
     cache = _cache_folder(args.compile_cache)
-    model = None
     if args.simulate is not None:  # the simulator needs JAX, and the model's labels first
         model = _load_model(args, cache)
+    else:  # JAX, the classifier and the model load while the recording is read, sampling
+        model = _ModelLoader(args, cache)  # starts and the first window fills
     replayed = None if args.replay is None else _read_replay(args)
     try:
         cfg = hw.stream_config(inputs, args.rate)
@@ -210,15 +212,17 @@ def _stream_from(hw, args, policy, inputs, cfg, speed, replayed, model, cache, l
         samples = hw.SamplingProcess(spec)
     sink = recorder = None
     try:
-        if model is None:
-            model = _load_model(args, cache)
+        warm = isinstance(model, _ModelLoader)
+        if warm:
+            model = model.result()  # its errors are raised here, where a load's always were
         volts = getattr(model, "channel", None) in ("voltage", "volts")
         lsb = cfg.fsr_v / 32768 if volts else 1.0
         limits = (-cfg.fsr_v, cfg.fsr_v) if volts else (-32768, 32767)
         quiet = args.stopped_below * lsb if args.stopped_below > 0 else None
         online = hw.OnlineClassifier(model, hop_s=args.hop, speed_mps=speed, limits=limits,
                                      quiet_std=quiet)  # fmt: skip
-        online.warm_up(cache)  # compile (or load from the cache) before the first window
+        if not warm:
+            online.warm_up(cache)  # compile (or load from the cache) before the first window
         if samples is None:
             # Sampled here (the endless simulator lives here; a virtual clock never waits):
             # the chip is made now, after the warm-up, so that its time starts with the
@@ -318,6 +322,41 @@ def _cache_folder(option: str | None) -> Path | None:
         raise CommandError(f"--compile-cache {folder}: cannot create it ({e.strerror}); give "
                            "another folder, or 'none'") from None  # fmt: skip
     return folder
+
+
+class _ModelLoader:
+    """The model, loaded and warmed up (:meth:`whiskerid.hw.OnlineClassifier.warm_up`) on a
+    thread of its own, started at once.
+
+    Importing JAX and the classifier and loading the model's compiled program take seconds
+    (about 1.5 s of CPU, three times that in wall time on a busy machine); the stream reads
+    its recording and starts its sampling process meanwhile. The thread only loads: a
+    failure is kept and raised by :meth:`result`, in the main thread, where the load's
+    errors have always been raised (a command that fails earlier never asks for it).
+    """
+
+    def __init__(self, args, cache: Path | None):
+        self._model = self._error = None
+        self._thread = threading.Thread(target=self._load, args=(args, cache), daemon=True,
+                                        name="whiskerid-model-load")  # fmt: skip
+        self._thread.start()
+
+    def _load(self, args, cache: Path | None) -> None:
+        try:
+            from .. import hw
+
+            model = _load_model(args, cache)
+            hw.OnlineClassifier(model).warm_up(cache)  # the model is warm for any hop
+            self._model = model
+        except BaseException as e:  # raised again in the main thread
+            self._error = e
+
+    def result(self):
+        """The warm model; the load's error, if it failed."""
+        self._thread.join()
+        if self._error is not None:
+            raise self._error
+        return self._model
 
 
 def _load_model(args, cache: Path | None):
