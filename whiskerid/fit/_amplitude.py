@@ -22,7 +22,8 @@ alternative explains does not widen its own yardstick), so that correlated noise
 fake a detection, and ``T = SᵀV⁻¹S`` is χ² with as many degrees of
 freedom as columns under a linear whisker. A statistic beyond its χ² quantile at
 :data:`P_FALSE`, with a change of at least :data:`MIN_REL_CHANGE_ZETA` in ζ or
-:data:`MIN_REL_CHANGE_F` in f, marks the linear fit ``check``; a Gauss–Newton step along
+:data:`MIN_REL_CHANGE_F` in f, or both statistics beyond it whatever the change, marks the
+linear fit ``check``; a Gauss–Newton step along
 ``[J, Z]`` estimates what the data found (``ζ`` and ``f`` at the largest and smallest
 amplitudes, or early and late), and the message says it.
 """
@@ -103,6 +104,13 @@ def amplitude_test(cal, *, resid=None, jac=None, core=None) -> dict:
     rejecting = [k for k in ("nonlinear", "split") if out[k]["p_value"] < P_FALSE
                  and (out[k]["rel_change_zeta"] >= MIN_REL_CHANGE_ZETA
                       or out[k]["rel_change_f"] >= MIN_REL_CHANGE_F)]  # fmt: skip
+    # Both tests significant: the model's terms and the model-free early/late split agree
+    # that the whisker changes along the decay. A change below the sizes above then still
+    # biases the linear values by many of their own 1σ where the recording is long and clean
+    # (0.1 % stiffening at 860 Hz: f1 8.6σ off); the misfits of a clean linear recording
+    # (release, modes left out) reach one test, not both.
+    if all(out[k]["p_value"] < P_FALSE for k in ("nonlinear", "split")):
+        rejecting = ["nonlinear", "split"]
     out["rejects"] = bool(rejecting)
     best = min(rejecting, key=lambda k: out[k]["p_value"]) if rejecting else None
     out["message"] = found[best][2] if best else ""
