@@ -106,9 +106,10 @@ def _autocorr(x):
 
 
 def _crossings(z):
-    # JAX takes the mean of booleans in float32: the same rounding here.
+    # JAX takes the mean of booleans in float32, times the reciprocal of the count: the
+    # same rounding here.
     flips = np.count_nonzero(np.signbit(z[1:]) != np.signbit(z[:-1]))
-    return np.float64(np.float32(flips) / np.float32(z.size - 1))
+    return np.float64(np.float32(flips) * (np.float32(1) / np.float32(z.size - 1)))
 
 
 def _octave_edges(window: int, rate_hz: float, df: float) -> np.ndarray:

@@ -60,12 +60,16 @@ def test_numpy_features_match_the_compiled_ones_to_float_precision(models):
     paths, ws, _ = models
     model = wi.ClassifierModel.load(paths["speed"])
     fast, _ = load_numpy_classifier(paths["speed"])
-    x, v = ws.windows[:8], ws.speeds[:8]
+    # Recorded windows, and noise at the slowest and fastest training speeds: there a bin
+    # lies exactly on the first and the last spatial band edge.
+    noise = 4000 * np.random.default_rng(2).standard_normal((4, ws.windows.shape[1])) + 1e4
+    x = np.concatenate([ws.windows[:8], noise])
+    v = np.concatenate([ws.speeds[:8], np.repeat([ws.speeds.min(), ws.speeds.max()], 2)])
     want = np.asarray(wi.compute_features(model.spec, x, v))
     from whiskerid.hw._numpy_features import window_features
 
     got = np.stack([window_features(fast.spec, w, s) for w, s in zip(x, v, strict=True)])
-    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9)  # float64 both
 
 
 def test_the_defaults_are_the_feature_specs():
@@ -121,3 +125,21 @@ def test_a_model_numpy_cannot_run_streams_with_jax_and_says_why(models, tmp_path
         "why": "a resonance fitted to each window (modal_fit)",
     }
     assert "labelling with JAX: a resonance fitted" in captured.err
+
+
+def test_the_stream_runs_with_jax_not_installed(models):
+    """JAX, jaxlib and equinox made unimportable, as on a Pi without them."""
+    rec = models[2] / "sand" / "sand_v0.15_r00.csv"
+    code = (
+        "import sys\n"
+        "for name in ('jax', 'jaxlib', 'equinox', 'optimistix', 'optax'):\n"
+        "    sys.modules[name] = None  # import raises ImportError\n"
+        "from whiskerid.cli import main\n"
+        f"sys.exit(main(['stream', '--model', {str(models[0]['speed'])!r}, '--replay', "
+        f"{str(rec)!r}, '--duration', '3', '--fast', '--json', '--compile-cache', 'none']))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    summary = json.loads(done.stdout)
+    assert summary["classifier"]["engine"] == "numpy" and summary["windows"] >= 4
+    assert "labelling with NumPy" in done.stderr
