@@ -59,7 +59,10 @@ class NumpyClassifier:
                       for i in range(len(sizes) - 1)] for j in range(members)]  # fmt: skip
         for j, net in enumerate(self.nets):
             for i, ((w, b), (a, c)) in enumerate(zip(net, itertools.pairwise(sizes), strict=True)):
-                if w.shape != (c, a) or b.shape != (c,) or not np.isfinite(w).all():
+                values = np.abs(np.concatenate([w.ravel(), b.ravel()]))
+                # Non-finite or beyond a trained network's (MAX_WEIGHT in the model file
+                # module): the compiled path refuses the file with its message.
+                if w.shape != (c, a) or b.shape != (c,) or not np.all(values <= 1e6):
                     raise ValueError(f"m{j}_W{i}/b{i}: shape {w.shape} or values")
         n = window_features(self.spec, np.zeros(self.window), 1.0).shape[0]
         if not (sizes[0] == n == self.mean.size == self.std.size and sizes[-1] == len(self.labels)):
