@@ -31,7 +31,7 @@ from whiskerid.hw import terrain_source
 
 from whiskerid import hw
 from whiskerid.classify import WhiskerResponse, load_dataset, train_classifier
-from whiskerid.classify._health_modes import mode_prominence, whisker_mode, white_prominence
+from whiskerid.io._health_modes import mode_prominence, whisker_mode, white_prominence
 from whiskerid.model import paper_record
 from whiskerid.terrain import AMPLIFIER, TERRAINS, synthesize_dataset
 

@@ -3,9 +3,10 @@ and the online stream loop.
 
 The driver side is light on purpose (numpy and, on the Pi, smbus2; no JAX), so it starts fast
 on a small board. The stream loop (``OnlineClassifier``, ``BackgroundClassifier``,
-``run_stream``, ``terrain_source``, ``open_recorder``, ...) runs the classifier and the
-terrain simulator, which need JAX: its names load on first use, so ``import whiskerid.hw``
-does not start JAX.
+``run_stream``, ``open_recorder``, ...) is NumPy too, and runs a model in NumPy when its
+features allow (``_numpy_classifier``), else the JAX one; the terrain simulator
+(``terrain_source``, ``terrain_signal``) needs JAX. These names load on first use, so
+``import whiskerid.hw`` stays light.
 See ``hw/README.md`` for wiring and setup.
 """
 
@@ -64,7 +65,8 @@ from ._sampling_process import SamplingProcess as SamplingProcess
 from ._sampling_process import open_sampler as open_sampler
 from ._sampling_process import stream_config as stream_config
 
-# The stream loop's public names, loaded on first use (PEP 562): they bring in JAX.
+# The stream loop's public names, loaded on first use (PEP 562); the terrain simulator's
+# bring in JAX.
 _STREAM_NAMES = (
     "FAULT_LABELS",
     "BackgroundClassifier",
@@ -80,10 +82,14 @@ _STREAM_NAMES = (
 
 
 def __getattr__(name: str):
-    if name in _STREAM_NAMES:
-        from . import _stream, _stream_loop, _terrain_source
+    if name in ("terrain_signal", "terrain_source"):  # the terrain simulator: JAX
+        from . import _terrain_source
 
-        for module in (_stream, _stream_loop, _terrain_source):
+        return getattr(_terrain_source, name)
+    if name in _STREAM_NAMES:  # NumPy only: the stream labels without JAX where it can
+        from . import _stream, _stream_loop
+
+        for module in (_stream, _stream_loop):
             if hasattr(module, name):
                 return getattr(module, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..classify import fuse_context
 from ..io._ads1115_spec import CODE_MAX, CODE_MIN
+from ..io._context import fuse_context
 from ._live import MAX_SPEED_MPS
 
 

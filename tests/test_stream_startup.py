@@ -32,8 +32,8 @@ class _Model:
 
 def test_the_loader_returns_the_model_warm_from_its_own_thread(monkeypatch, tmp_path):
     model = _Model()
-    monkeypatch.setattr(_stream, "_load_model", lambda args, cache: model)
-    assert _stream._ModelLoader(None, tmp_path).result() is model
+    monkeypatch.setattr(_stream, "_load_model", lambda args, cache: (model, {"engine": "jax"}))
+    assert _stream._ModelLoader(None, tmp_path).result() == (model, {"engine": "jax"})
     assert model.calls[0] == ("saved", tmp_path) and model.calls[1][:2] == ("proba", (200,))
     assert model.thread == "whiskerid-model-load"  # not the main thread
 

@@ -8,8 +8,8 @@ from whiskerid.hw import OnlineClassifier
 
 import whiskerid as wi
 from whiskerid.classify import HealthReference, TrainConfig, load_dataset, window_health
-from whiskerid.classify._health import descriptors, sensor_fault, white_flatness
-from whiskerid.classify._health_modes import mode_prominence
+from whiskerid.io._health import descriptors, sensor_fault, white_flatness
+from whiskerid.io._health_modes import mode_prominence
 
 RATE = 200.0
 LEVEL = 13200  # ADC codes of 1.65 V at ±4.096 V full scale: a Hall sensor at rest

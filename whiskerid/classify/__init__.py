@@ -7,14 +7,19 @@ whisker-aware filters in ``_features_whisker``), ``_mlp`` (the network and its t
 ``_split`` (splits and folds by recording), ``_train`` (a :class:`ClassifierModel` from
 windows), ``_model_file`` (the model, its compiled predict functions and its files),
 ``_whisker`` (the whisker's own transfer function, divided out of whisker-aware
-features), ``_context`` (labels fused over consecutive windows), ``_evaluate`` (scores,
-cross-validation, the paper's protocol) and ``_borealtc`` (a public IMU dataset).
+features), ``_evaluate`` (scores, cross-validation, the paper's protocol) and
+``_borealtc`` (a public IMU dataset). The window checks (:func:`window_health`) and the
+context fusion (:func:`fuse_context`) are NumPy only and live in :mod:`whiskerid.io`
+(``_health``, ``_health_modes``, ``_context``), so that the online stream runs them
+without JAX; they are re-exported here.
 """
 
 from .. import _jax_setup as _jax_setup
+from ..io._context import fuse_context as fuse_context
+from ..io._health import HealthReference as HealthReference
+from ..io._health import window_health as window_health
 from ._analysis import analyze_dataset as analyze_dataset
 from ._borealtc import load_borealtc as load_borealtc
-from ._context import fuse_context as fuse_context
 from ._dataset import RATE_TOLERANCE as RATE_TOLERANCE
 from ._dataset import WindowSet as WindowSet
 from ._dataset import load_dataset as load_dataset
@@ -36,8 +41,6 @@ from ._features import band_energies as band_energies
 from ._features import base_band_levels as base_band_levels
 from ._features import compute_features as compute_features
 from ._features import spectral_peaks as spectral_peaks
-from ._health import HealthReference as HealthReference
-from ._health import window_health as window_health
 from ._mlp import TrainConfig as TrainConfig
 from ._mlp import default_config as default_config
 from ._model_file import ClassifierModel as ClassifierModel

@@ -21,13 +21,11 @@ from ..io import (
     recording_rate,
 )
 from ..io import timestamp_rate as timestamp_rate  # the package re-exports it, as before
+from ..io._rate import RATE_TOLERANCE as RATE_TOLERANCE  # in io: the stream checks it without JAX
 
 RECORDING_SUFFIXES = (".csv", ".npz", ".npy")
 #: Fewest samples a window may hold: a spectrum of fewer bins says nothing of a terrain.
 MIN_WINDOW = 16
-#: How far apart the rates of one dataset's recordings, or of a recording and the rate
-#: asked for, may be (one ADS1115's oscillator is good to a few per cent).
-RATE_TOLERANCE = 0.05
 #: Timestamp steps longer than this many median steps are gaps that windows never span.
 GAP_STEPS = 10.0
 

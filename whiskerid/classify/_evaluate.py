@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from ._context import check_context, default_context_s, fuse_context
+from ..io._context import check_context, default_context_s, fuse_context
 from ._dataset import WindowSet
 from ._mlp import (
     TrainConfig,

@@ -327,7 +327,7 @@ def fitted_features(
         parts.append(jnp.log(o_share + 1e-8) + jnp.log(total) + 2 * log_rms)
     if spec.use_speed:
         v = jnp.asarray(speed_mps, dtype=float)
-        s_edges = jnp.geomspace(num.spatial_lo, num.spatial_hi, spec.n_spatial_bands + 1)
+        s_edges = num.spatial_edges  # host-computed (see FeatureSpec.numbers)
         s_bands = jnp.log(band_energies(freqs / v, power, s_edges) + 1e-4)
         parts.append(s_bands)
         parts.append(jnp.stack([jnp.log(jnp.maximum(pf[0], df) / v),

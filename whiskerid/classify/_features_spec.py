@@ -184,9 +184,14 @@ class FeatureSpec:
         values = (self.rate_hz, self.rate_hz / n, freqs[1:], 2.0 / self.rate_hz,
                   self.spatial_lo, self.spatial_hi)  # fmt: skip
         plain = [jnp.asarray(v, dtype=jnp.float64) for v in values]
+        # The spatial band edges, here too: computed in compiled code from traced ends, the
+        # outer ones move by an ulp from model to model, and at the fastest and slowest
+        # training speeds the Nyquist and 2Δf bins lie exactly on them.
+        edges = jnp.asarray(np.geomspace(self.spatial_lo, self.spatial_hi,
+                                         self.n_spatial_bands + 1))  # fmt: skip
         if not self.deconvolve:
             empty = jnp.zeros((0,), dtype=jnp.complex128)
-            return Numbers(*plain, empty, empty, jnp.zeros((0,)))
+            return Numbers(*plain, empty, empty, jnp.zeros((0,)), edges)
         if whisker is None:
             raise ValueError(
                 "whisker-aware features need the whisker that recorded the windows (a "
@@ -199,11 +204,13 @@ class FeatureSpec:
         recolour = whisker.recolour(reference, padded, self.rate_hz)
         if not self.floor_match:
             base = whisker.to_base(padded, self.rate_hz)
-            return Numbers(*plain, jnp.asarray(recolour), jnp.asarray(base), jnp.zeros((0,)))
+            return Numbers(*plain, jnp.asarray(recolour), jnp.asarray(base), jnp.zeros((0,)),
+                           edges)  # fmt: skip
         # the base motion is read from the recoloured window, floor matched
         base = reference.to_base(padded, self.rate_hz)
         dither = whisker.dither(reference, padded, self.rate_hz)
-        return Numbers(*plain, jnp.asarray(recolour), jnp.asarray(base), jnp.asarray(dither))
+        return Numbers(*plain, jnp.asarray(recolour), jnp.asarray(base), jnp.asarray(dither),
+                       edges)  # fmt: skip
 
 
 class Numbers(NamedTuple):
@@ -219,6 +226,7 @@ class Numbers(NamedTuple):
     recolour: Array  # (bins of a 2×window FFT, channels, channels), complex; empty if unused
     to_base: Array  # the same shape: codes to base acceleration (m/s²)
     dither: Array  # (bins of a 2×window FFT, channels): floor-matching noise; empty if unused
+    spatial_edges: Float[Array, " edges"]  # log-spaced, spatial_lo to spatial_hi (cycles/m)
 
 
 #: Window-fit features per channel: damped frequency, ζ, log amplitude, ok.

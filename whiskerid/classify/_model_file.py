@@ -30,7 +30,9 @@ import numpy as np
 
 from .._version import __version__
 from ..io import Recording, RecordingError, atomic_folder, atomic_write, sha256_of
-from ._context import check_context, fuse_context
+from ..io._context import check_context, fuse_context
+from ..io._health import HealthReference, window_health
+from ..io._health_modes import gain_ratio
 from ._dataset import (
     check_rate,
     check_speed,
@@ -48,8 +50,6 @@ from ._features import (
     window_features,
     window_fit_features,
 )
-from ._health import HealthReference, window_health
-from ._health_modes import gain_ratio
 from ._mlp import (
     MLP,
     from_arrays,

@@ -5,11 +5,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from ._context import check_context, default_context_s
+from ..io._context import check_context, default_context_s
+from ..io._health import HealthReference
+from ..io._health_modes import whisker_mode
 from ._dataset import WindowSet
 from ._features import FeatureSpec, compute_features, rerecorded
-from ._health import HealthReference
-from ._health_modes import whisker_mode
 from ._mlp import TrainConfig, default_config, train_mlp
 from ._model_file import ClassifierModel, recording_hashes
 from ._split import grouped_split

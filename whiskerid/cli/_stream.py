@@ -213,8 +213,12 @@ def _stream_from(hw, args, policy, inputs, cfg, speed, replayed, model, cache, l
     sink = recorder = None
     try:
         warm = isinstance(model, _ModelLoader)
-        if warm:
-            model = model.result()  # its errors are raised here, where a load's always were
+        # The loader's errors are raised here, where a load's always were.
+        model, engine = model.result() if warm else model
+        if not args.quiet:
+            print("stream: labelling with " + ("NumPy (this model's features need no JAX)"
+                  if engine["engine"] == "numpy" else f"JAX: {engine['why']}"),
+                  file=sys.stderr)  # fmt: skip
         volts = getattr(model, "channel", None) in ("voltage", "volts")
         lsb = cfg.fsr_v / 32768 if volts else 1.0
         limits = (-cfg.fsr_v, cfg.fsr_v) if volts else (-32768, 32767)
@@ -248,10 +252,10 @@ def _stream_from(hw, args, policy, inputs, cfg, speed, replayed, model, cache, l
         for closing in (sink, speed if isinstance(speed, hw.SpeedFeed) else None, bus):
             if closing is not None:
                 closing.close()
-    return _report(args, samples, sampler, stats, summary, policy)
+    return _report(args, samples, sampler, stats, summary, policy, engine)
 
 
-def _report(args, samples, sampler, stats, summary, policy) -> dict:
+def _report(args, samples, sampler, stats, summary, policy, engine) -> dict:
     """The summary on stderr, and as the command's JSON."""
     summary.samples, summary.duration_s = stats.samples, stats.duration_s
     summary.skipped_windows, summary.dropped_windows = stats.skipped_windows, stats.dropped_windows
@@ -262,6 +266,7 @@ def _report(args, samples, sampler, stats, summary, policy) -> dict:
     summary.bus_errors = {"timeouts": st.timeouts, "other_errors": st.other_errors,
                           "last_error": st.last_error}  # fmt: skip
     out = summary.to_dict(truth=args.simulate)
+    out["classifier"] = engine
     if sampler is None:
         out["sampling"] = {"process": True, "priority": samples.priority,
                            "skipped_slots": st.skipped_slots,
@@ -328,11 +333,13 @@ class _ModelLoader:
     """The model, loaded and warmed up (:meth:`whiskerid.hw.OnlineClassifier.warm_up`) on a
     thread of its own, started at once.
 
-    Importing JAX and the classifier and loading the model's compiled program take seconds
-    (about 1.5 s of CPU, three times that in wall time on a busy machine); the stream reads
-    its recording and starts its sampling process meanwhile. The thread only loads: a
-    failure is kept and raised by :meth:`result`, in the main thread, where the load's
-    errors have always been raised (a command that fails earlier never asks for it).
+    A model whose features NumPy computes is run in NumPy (:func:`load_numpy_classifier`):
+    loading it takes milliseconds. Otherwise importing JAX and the classifier and loading
+    the model's compiled program take seconds (about 1.5 s of CPU, three times that in wall
+    time on a busy machine); the stream reads its recording and starts its sampling process
+    meanwhile. The thread only loads: a failure is kept and raised by :meth:`result`, in the
+    main thread, where the load's errors have always been raised (a command that fails
+    earlier never asks for it).
     """
 
     def __init__(self, args, cache: Path | None):
@@ -345,26 +352,41 @@ class _ModelLoader:
         try:
             from .. import hw
 
-            model = _load_model(args, cache)
+            model, engine = _load_model(args, cache)
             hw.OnlineClassifier(model).warm_up(cache)  # the model is warm for any hop
-            self._model = model
+            self._model = model, engine
         except BaseException as e:  # raised again in the main thread
             self._error = e
 
     def result(self):
-        """The warm model; the load's error, if it failed."""
+        """The warm model and how it runs (see :func:`_load_model`); the load's error, if it
+        failed."""
         self._thread.join()
         if self._error is not None:
             raise self._error
         return self._model
 
 
-def _load_model(args, cache: Path | None):
-    """The model, loaded with JAX's compilation cache set up; refuses one that cannot serve."""
-    use_compile_cache(cache)
-    from ..classify import RATE_TOLERANCE, ClassifierModel
+def load_numpy_classifier(path: Path):
+    """:func:`whiskerid.hw._numpy_classifier.load_numpy_classifier` (imported when called)."""
+    from ..hw._numpy_classifier import load_numpy_classifier as load
 
-    model = ClassifierModel.load(args.model)
+    return load(path)
+
+
+def _load_model(args, cache: Path | None):
+    """The model, and how it runs: ``{"engine": "numpy"}`` for a model whose features
+    NumPy computes (no JAX imported), else ``{"engine": "jax", "why": ...}``, loaded with
+    JAX's compilation cache set up. Refuses a model that cannot serve."""
+    from ..io._rate import RATE_TOLERANCE
+
+    model, why = load_numpy_classifier(args.model)
+    engine = {"engine": "numpy"} if model is not None else {"engine": "jax", "why": why}
+    if model is None:
+        use_compile_cache(cache)
+        from ..classify import ClassifierModel
+
+        model = ClassifierModel.load(args.model)
     if args.simulate is not None and args.simulate not in model.labels:
         raise CommandError(f"--simulate {args.simulate!r} is not a terrain of this model; "
                             f"its labels are {', '.join(model.labels)}")  # fmt: skip
@@ -376,7 +398,7 @@ def _load_model(args, cache: Path | None):
             f"at: stream at {model.rate_hz:g} Hz or more, or train a model at {args.rate:g} Hz "
             "(whiskerid train --rate)"
         )
-    return model
+    return model, engine
 
 
 def _speed(args, replayed):

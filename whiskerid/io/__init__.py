@@ -1,6 +1,9 @@
 """Recordings on disk (CSV, NPZ, NPY), provenance, and the ADS1115's datasheet facts.
 
-No JAX here: the Raspberry Pi side reads and writes through this package.
+No JAX here: the Raspberry Pi side reads and writes through this package. It also holds
+the NumPy-only parts of classification that the online stream runs without JAX: the window
+checks (``_health``, ``_health_modes``; re-exported by :mod:`whiskerid.classify`) and the
+fusion of consecutive windows' probabilities (``_context``).
 """
 
 from ._added_mass import ADDED_MASS_KEY as ADDED_MASS_KEY

@@ -11,6 +11,9 @@ from ._recording import Recording, RecordingError
 
 #: Largest relative disagreement between ``rate_hz`` metadata and the timestamps.
 RATE_METADATA_TOLERANCE = 0.15
+#: How far apart the rates of one dataset's recordings, or of a recording and the rate
+#: asked for, may be (one ADS1115's oscillator is good to a few per cent).
+RATE_TOLERANCE = 0.05
 
 #: Largest share of zero steps a time column may hold: more means it was rounded more
 #: coarsely than the samples were taken.

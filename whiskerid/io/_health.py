@@ -16,7 +16,7 @@ window is therefore checked first, offline (``classify``) and online (``stream``
   spectrum is shaped by them; electrical noise alone has a flat spectrum at a level set by
   the electronics, not the ground. Nor does noise show a **response near the whisker's
   mode** (its calibrated f1, or the training windows' resonance): the mode check of
-  :mod:`whiskerid.classify._health_modes`.
+  :mod:`whiskerid.io._health_modes`.
 
 Noise-likeness is measured by the spectral flatness (geometric over arithmetic mean of the
 periodogram of the Hann-tapered window, mean removed): 1 for a flat spectrum, about
@@ -122,7 +122,7 @@ class HealthReference:
         rate_hz: Sample rate of the windows (Hz), for the mode check; None: no mode check.
         modes_hz: Where the whisker's response stands out (Hz, below Nyquist): the
             calibrated whisker's mode, or the training windows' resonance
-            (:mod:`whiskerid.classify._health_modes`).
+            (:mod:`whiskerid.io._health_modes`).
         mode_floor: Mode prominence (log10) a window must reach in some channel: white
             noise's 99.9 % quantile (:func:`white_prominence`), or the training windows'
             :data:`MODE_TRAIN_QUANTILE` quantile where lower; None when the check is off

@@ -141,7 +141,7 @@ def gain_ratio(other, own, rate_hz: float, window: int) -> float:
     """How much larger ``other``'s windows are than ``own``'s for the same ground: the
     ratio of the RMS of their sampled transfer functions (first sensor, amplifiers
     included) over the bins the features use, a flat base spectrum assumed (the amplitude
-    range it scales is wide: :data:`whiskerid.classify._health.RMS_MARGIN`)."""
+    range it scales is wide: :data:`whiskerid.io._health.RMS_MARGIN`)."""
     freqs = np.fft.rfftfreq(2 * int(window), 1.0 / rate_hz)[1:]
     t_other = np.abs(np.asarray(other.transfer(freqs, rate_hz))[:, 0, 0])
     t_own = np.abs(np.asarray(own.transfer(freqs, rate_hz))[:, 0, 0])
