@@ -16,7 +16,7 @@ import numpy as np
 from ._inputs import Rounds
 from ._recorder import Recorder, unique_path
 from ._sampler import Gap
-from ._stream import FAULT_LABELS, OnlineClassifier, PendingWindow, WindowLabel
+from ._stream import FAULT_LABELS, STOPPED, OnlineClassifier, PendingWindow, WindowLabel
 
 
 class BackgroundClassifier:
@@ -163,6 +163,11 @@ class StreamSummary:
         lat = self._latency[: min(self.windows, LATENCY_KEPT)] * 1e3
         counts = dict(sorted(self.label_counts.items()))
         terrains = {k: v for k, v in counts.items() if k not in FAULT_LABELS}
+        # A terrain is the stream's majority only when most windows the robot was moving in
+        # carried one: a dead or unplugged whisker whose checks let a few windows through
+        # must not be summed up as a terrain.
+        moving = sum(v for k, v in counts.items() if k != STOPPED)
+        unlabelled = moving - sum(terrains.values())
         out = {
             "duration_s": round(self.duration_s, 3),
             "samples": self.samples,
@@ -176,7 +181,13 @@ class StreamSummary:
             "label_counts": counts,
             "faults": dict(sorted(self.fault_counts.items())),
             "fault_episodes": self.fault_episodes,
-            "majority_label": max(terrains, key=terrains.get) if terrains else None,
+            "majority_label": (
+                max(terrains, key=terrains.get)
+                if terrains and unlabelled < sum(terrains.values())
+                else None
+            ),
+            "terrain_windows": sum(terrains.values()),
+            "unlabelled_windows": unlabelled,
             "latency_ms": {"p50": _pct(lat, 50), "p99": _pct(lat, 99)},
             "record": self.record,
             "record_stopped": self.record_stopped,

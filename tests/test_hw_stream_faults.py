@@ -94,8 +94,18 @@ def test_a_fault_episode_is_reported_once_and_its_end_too():
            for i, (lab, why) in enumerate(zip(labels, reasons, strict=True))]  # fmt: skip
     assert got == [None, "start", None, "start", "end", "start"]
     out = summary.to_dict()
-    assert out["fault_episodes"] == 3 and out["majority_label"] == "brick"
+    assert out["fault_episodes"] == 3
+    # 2 terrain windows of 6: the stream mostly could not label, so no majority terrain
+    assert out["majority_label"] is None and out["unlabelled_windows"] == 4
     assert out["faults"] == {"no-data: x": 1, "sensor-fault: clipped": 1, "sensor-fault: flat": 2}
+    summary.add(WindowLabel(6, "brick", 0.5, 1e-3, "brick", ""))
+    for i in range(7, 10):
+        summary.add(WindowLabel(i, "stopped", 0.0, 1e-3, "stopped", "the robot is stopped"))
+    out = summary.to_dict()  # stopped windows count for neither side
+    assert out["majority_label"] is None and out["terrain_windows"] == 3
+    summary.add(WindowLabel(10, "sand", 0.5, 1e-3, "sand", ""))
+    summary.add(WindowLabel(11, "brick", 0.5, 1e-3, "brick", ""))
+    assert summary.to_dict()["majority_label"] == "brick"  # 5 terrain windows against 4
 
 
 def test_the_summary_keeps_counts_not_every_window():

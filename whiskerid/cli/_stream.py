@@ -274,8 +274,13 @@ def _report(args, samples, sampler, stats, summary, policy, engine) -> dict:
     else:
         out["sampling"] = {"process": False, "skipped_slots": st.skipped_slots}
     faults = sum(summary.fault_counts.values())
+    majority = out["majority_label"] or (
+        f"none ({out['unlabelled_windows']} of the moving windows got no terrain)"
+        if out["unlabelled_windows"]
+        else "none"
+    )
     print(f"stream: {out['samples']} samples, {out['windows']} windows, majority "
-          f"{out['majority_label']}, gaps {out['gaps']}, overruns {out['overruns']}, "
+          f"{majority}, gaps {out['gaps']}, overruns {out['overruns']}, "
           f"fault windows {faults} in {out['fault_episodes']} episode(s), "
           f"dropped {out['dropped_windows']}"
           + _right(out, args.simulate)
