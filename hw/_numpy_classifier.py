@@ -74,6 +74,11 @@ class NumpyClassifier:
         """``(label, reason)`` when the window gets no terrain (as the JAX model's)."""
         return window_health(samples, self.health)
 
+    @property
+    def health_in_use(self):
+        """The health reference the windows are checked against (the model file's)."""
+        return self.health
+
     def window_proba(self, samples, speed: float | None = None) -> np.ndarray:
         """Class probabilities of one window, shape ``(classes,)`` (float32)."""
         x = np.asarray(samples, dtype=np.float64)

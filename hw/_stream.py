@@ -28,6 +28,8 @@ import numpy as np
 
 from ..io._ads1115_spec import CODE_MAX, CODE_MIN
 from ..io._context import fuse_context
+from ..io._health import UNKNOWN
+from ..io._health_context import ModeContext
 from ._live import MAX_SPEED_MPS
 
 
@@ -165,6 +167,7 @@ class OnlineClassifier:
         self._next_s: float | None = None
         self._grid = np.arange(model.window) / model.rate_hz
         self._recent: collections.deque = collections.deque()  # (t_end_s, probabilities)
+        self._modes = ModeContext()  # the mode check over the last windows together
         self._last_speed: tuple[float, float] | None = None  # (m/s, stream time)
         #: The window checks, in order (see :meth:`check_window`).
         self.window_checks: list[Callable] = [self._check, self._no_speed, self._stopped]
@@ -304,7 +307,12 @@ class OnlineClassifier:
         if pending.fault is not None:
             return self._fault(pending, *pending.fault)
         health = getattr(self.model, "window_health", None)  # no terrain for a non-whisker
-        if health is not None and (why := health(pending.samples)) is not None:
+        why = None if health is None else health(pending.samples)
+        if why is None or why[0] == UNKNOWN:  # an unknown window still counts for the mode
+            ref = getattr(self.model, "health_in_use", None)
+            over = self._modes.check(pending.samples, pending.t_end_s, self.window_s, ref)
+            why = why or (over and (UNKNOWN, over))
+        if why:
             return self._fault(pending, *why)
         p = np.asarray(self.model.window_proba(pending.samples, pending.speed_mps))
         if not (np.all(np.isfinite(p)) and np.all(p >= 0) and abs(float(np.sum(p)) - 1) < 1e-3):
@@ -327,6 +335,8 @@ class OnlineClassifier:
 
     def _fault(self, pending: PendingWindow, label: str, reason: str) -> WindowLabel:
         self._recent.clear()  # what came before the fault says nothing about what follows
+        if label != UNKNOWN:
+            self._modes.reset()
         latency = self._clock() - pending.arrived_s
         return WindowLabel(pending.t_end_s, label, 0.0, latency, label, reason,
                            pending.speed_mps, pending.speed_note)  # fmt: skip

@@ -31,7 +31,8 @@ import numpy as np
 from .._version import __version__
 from ..io import Recording, RecordingError, atomic_folder, atomic_write, sha256_of
 from ..io._context import check_context, fuse_context
-from ..io._health import HealthReference, window_health
+from ..io._health import UNKNOWN, HealthReference, window_health
+from ..io._health_context import ModeContext
 from ..io._health_modes import gain_ratio
 from ._dataset import (
     check_rate,
@@ -143,12 +144,17 @@ class ClassifierModel:
         modes, the noise check and the amplitude range scaled by its gain do
         (:meth:`HealthReference.for_whisker`).
         """
+        return window_health(samples, self.health_in_use)
+
+    @property
+    def health_in_use(self) -> HealthReference | None:
+        """The health reference for the whisker read now (:meth:`window_health`)."""
         if self.health is None or self.recorded_with is self.whisker:
-            return window_health(samples, self.health)
+            return self.health
         if self._other_health is None:
             gain = gain_ratio(self.recorded_with, self.whisker, self.rate_hz, self.window)
             self._other_health = self.health.for_whisker(gain)
-        return window_health(samples, self._other_health)
+        return self._other_health
 
     @property
     def needs_whisker(self) -> bool:
@@ -377,7 +383,15 @@ class ClassifierModel:
                     "to the recording or pass --speed"
                 )
         # A window that is not the whisker gets no terrain, and no label fuses across it.
-        faults = [self.window_health(x) for x in w]
+        faults, context = [], ModeContext()
+        for x, s in zip(w, starts, strict=True):
+            fault = self.window_health(x)
+            if fault is not None and fault[0] != UNKNOWN:
+                context.reset()  # a sensor fault: what follows is another signal
+            else:  # an unknown window still counts for the mode over several
+                why = context.check(x, s + self.window_s, self.window_s, self.health_in_use)
+                fault = fault or (None if why is None else (UNKNOWN, why))
+            faults.append(fault)
         good = np.array([f is None for f in faults])
         p = self.predict_proba(w[good], None if speed is None else np.full(good.sum(), speed))
         fused = self.fuse(p, np.cumsum(~good)[good], starts[good])

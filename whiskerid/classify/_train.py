@@ -245,7 +245,8 @@ def train_classifier(
     # What the training windows look like, so that a window unlike them all (a dead
     # sensor's noise, another instrument) is 'unknown' rather than some terrain.
     modes = None if whisker is None else (whisker_mode(whisker, ws.rate_hz, spec.window),)
-    model.health = HealthReference.fit(ws.windows, ws.labels, rate_hz=ws.rate_hz, modes_hz=modes)
+    model.health = HealthReference.fit(ws.windows, ws.labels, rate_hz=ws.rate_hz, modes_hz=modes,
+                                      groups=ws.recording)  # fmt: skip
     model.info["recordings_sha256"] = recording_hashes(ws.sources)
     model.channel = ws.channel if channel is None else channel
     if hop is not None:

@@ -36,6 +36,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ._health_context import CONTEXT_TRAIN_QUANTILE, context_prominence, white_context
 from ._health_modes import mode_prominence, training_modes, white_detection, white_prominence
 
 SENSOR_FAULT = "sensor-fault"
@@ -129,6 +130,9 @@ class HealthReference:
             (no rate, or a threshold that catches less than :data:`MIN_NOISE_CAUGHT` of
             white noise).
         mode_noise_caught: Share of white-noise windows below ``mode_floor``.
+        context_floor: Mode prominence (log10) the mean periodogram of the last few
+            windows must reach: the training windows' weakest stretches
+            (:mod:`whiskerid.io._health_context`); None: no such check.
         rms_gain: On another whisker, the factor its response puts on the amplitude range
             (the range then applies without ``ranges``); None: no such scaling.
         ranges: Whether the level and amplitude ranges apply (not on another whisker,
@@ -145,16 +149,21 @@ class HealthReference:
     ranges: bool = True
     mode_noise_caught: float | None = None
     rms_gain: float | None = None
+    context_floor: float | None = None
 
     @classmethod
     def fit(cls, windows, labels=None, *, rate_hz: float | None = None,
-            modes_hz=None) -> "HealthReference":  # fmt: skip
+            modes_hz=None, groups=None) -> "HealthReference":  # fmt: skip
         """The reference of training windows ``(n, [channels,] window)``; sensor-fault
         windows among them are left out. ``labels`` is accepted for symmetry and unused.
         With ``rate_hz``, the mode check is set up at ``modes_hz`` (the calibrated
-        whisker's; by default the training windows' own resonance, :func:`training_modes`)."""
+        whisker's; by default the training windows' own resonance, :func:`training_modes`),
+        and over consecutive windows of one recording (``groups``, each window's; None:
+        one recording) the context threshold."""
         w = np.asarray(windows, dtype=float)
-        w = w[np.array([sensor_fault(x) is None for x in w])]
+        keep = np.array([sensor_fault(x) is None for x in w])
+        groups = np.zeros(len(w), int) if groups is None else np.asarray(groups)[keep]
+        w = w[keep]
         chans = w if w.ndim == 3 else w[:, None, :]
         d = descriptors(w).reshape(len(w), chans.shape[1], 2)
         level = np.median(chans, axis=-1)
@@ -175,6 +184,12 @@ class HealthReference:
             ref = replace(ref, rate_hz=float(rate_hz), modes_hz=modes,
                           mode_floor=floor if caught >= MIN_NOISE_CAUGHT else None,
                           mode_noise_caught=caught)  # fmt: skip
+            ctx = np.max(context_prominence(w, rate_hz, modes, groups), axis=1)
+            if ctx.size and ref.mode_floor is not None:
+                # The weakest stretches of training, kept where white noise stays below.
+                cfloor = float(np.quantile(ctx, CONTEXT_TRAIN_QUANTILE, method="lower"))
+                if cfloor > white_context(w.shape[-1], float(rate_hz), modes):
+                    ref = replace(ref, context_floor=cfloor)
         rejected = np.mean([ref.out_of_range(x) is not None for x in w])
         return replace(ref, train_rejection=float(rejected))
 
@@ -226,6 +241,7 @@ class HealthReference:
             "modes_hz": list(self.modes_hz),
             "mode_floor": self.mode_floor,
             "mode_noise_caught": self.mode_noise_caught,
+            "context_floor": self.context_floor,
         }
 
     def for_whisker(self, gain: float | None = None) -> "HealthReference":
@@ -238,7 +254,7 @@ class HealthReference:
         acceleration ∝ 1/f1²), and at f1 × 1.3 the simulated set's slow runs over soft
         ground put 4 % of clean windows below it at that whisker's mode
         (``benchmarks/window_health.py``)."""
-        return replace(self, mode_floor=None, ranges=False, rms_gain=gain)
+        return replace(self, mode_floor=None, context_floor=None, ranges=False, rms_gain=gain)
 
     @classmethod
     def from_dict(cls, d: dict) -> "HealthReference":
@@ -252,6 +268,10 @@ class HealthReference:
                   None if floor is None else float(floor))  # fmt: skip
         if (caught := d.get("mode_noise_caught")) is not None:
             ref = replace(ref, mode_noise_caught=float(caught))
+        if (cfloor := d.get("context_floor")) is not None:
+            if ref.mode_floor is None:
+                raise ValueError("a context threshold without a mode threshold")
+            ref = replace(ref, context_floor=float(cfloor))
         if ref.mode_floor is not None and not (ref.rate_hz and ref.modes_hz):
             raise ValueError("a mode threshold without its rate or modes")
         if not all(0 < f < (ref.rate_hz or np.inf) / 2 for f in ref.modes_hz):
