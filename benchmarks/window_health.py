@@ -12,9 +12,11 @@ Trains two classifiers on the simulated set (``dataset synth``: 7 terrains at 0.
   whisker's mode);
 * the **detection rate** on dead inputs through the emulated chip: a flat 1.65 V plus 1, 2
   or 3 mV of noise, white noise alone, a chip toggling between two codes, a chip stuck at
-  one code, and an input pinned at full scale;
+  one code, an input pinned at full scale, and electrical noise coloured by a filter (moving
+  averages of 3 to 40 samples, AR(1) and 1/f noise, 50 Hz hum plus noise; 10 codes RMS);
 
-with the mode check alone as well as with every check. Prints one JSON object.
+with the mode check alone (one window, and over three windows together, in time order per
+recording as ``classify`` runs it) as well as with every check. Prints one JSON object.
 
     .venv/bin/python benchmarks/window_health.py [--runs 3]
 """

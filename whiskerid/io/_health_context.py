@@ -1,19 +1,19 @@
 """The mode check over the last few windows together: :class:`ModeContext`.
 
-One window of 1 s resolves the spectrum to 1 Hz with two degrees of freedom a bin, and
-there noise coloured by a filter can look like the whisker's weakest response: a moving
-average of white noise over 20 samples at 200 Hz has a sidelobe between its nulls at 40
-and 50 Hz, right on a 46 Hz mode, and a 1 s window of it stands out there as much as a
-slow run over soft ground does in one window in two hundred. Over several windows the
-periodograms average (the spread of the prominence shrinks as 1/√k) while the whisker's
-response stays where it is: the training windows' weakest three seconds stand well above
-what such noise reaches on average. So the mode prominence
-(:func:`whiskerid.io._health_modes.mode_prominence`) of the mean periodogram of the last
-:data:`CONTEXT_WINDOWS` windows must reach the training windows' weakest
-(:attr:`HealthReference.context_floor`, their :data:`CONTEXT_TRAIN_QUANTILE` quantile over
-consecutive windows of one recording): weaker is a stretch unlike any the model was trained
-on. The check starts once that many windows follow one another without a fault; before, the
-single-window checks alone apply.
+One window of 1 s resolves the spectrum to 1 Hz with two degrees of freedom a bin, and there
+noise coloured by a filter can look like the whisker's weakest response: a moving average of
+white noise over 20 samples at 200 Hz has a sidelobe between its nulls at 40 and 50 Hz,
+right on a 46 Hz mode, and a 1 s window of it stands out there as much as a slow run over
+soft ground does in one window in two hundred. Over several windows the periodograms average
+(the spread of the prominence shrinks as 1/√k) while the whisker's response stays where it
+is: the training windows' weakest three seconds stand well above what such noise reaches on
+average. So the mode prominence (:func:`whiskerid.io._health_modes.mode_prominence`) of the
+mean periodogram of the last :data:`CONTEXT_WINDOWS` windows must reach the training
+windows' weakest (:attr:`HealthReference.context_floor`: the weakest three windows in a row
+of any training recording): weaker is a stretch unlike any the model was trained on. Windows
+refused by the single-window checks as ``unknown`` count in the stretch (a dead input's own
+refusals must not hide it); a sensor fault starts it afresh. The check starts once that many
+windows follow one another; before, the single-window checks alone apply.
 """
 
 import collections
@@ -25,8 +25,9 @@ from ._health_modes import _periodogram, _prominence
 
 #: How many consecutive windows the mode is judged over.
 CONTEXT_WINDOWS = 3
-#: The context threshold is this quantile of the training windows' context prominence.
-CONTEXT_TRAIN_QUANTILE = 0.005
+#: The context threshold is this quantile of the training windows' context prominence
+#: (0: the weakest three windows in a row of any training recording).
+CONTEXT_TRAIN_QUANTILE = 0.0
 
 
 def context_prominence(windows, rate_hz: float, modes_hz, groups=None,
