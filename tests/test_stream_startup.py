@@ -8,7 +8,7 @@ import threading
 import numpy as np
 import pytest
 
-from whiskerid.cli import _stream, main
+from whiskerid.cli import _main, _prestart, _stream, main
 from whiskerid.io import Recording, write_csv
 
 
@@ -61,6 +61,24 @@ def test_a_model_that_cannot_load_is_refused_in_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
     assert "no classifier model here" in err
+
+
+def test_a_refused_stream_ends_the_sampling_process_it_started_early(tmp_path, monkeypatch,
+                                                                    capsys):  # fmt: skip
+    started = []
+
+    def spy(args):  # the real prestart, keeping the child it started
+        _prestart.prestart(args)
+        started.append(getattr(args, "_sampling_child", None))
+
+    monkeypatch.setattr(_main, "prestart", spy)
+    t = np.arange(400) / 200.0
+    rec = tmp_path / "sine.csv"
+    write_csv(rec, Recording(t, {"A0": np.zeros(400, dtype=int)}, {"units": "code"}))
+    assert main(["stream", "--model", str(tmp_path / "m"), "--replay", str(rec)]) == 2
+    assert "no classifier model here" in capsys.readouterr().err
+    (child,) = started
+    assert child is not None and child.returncode == 0  # started, then ended unused
 
 
 def test_the_classifier_does_not_import_scipy_stats():
