@@ -32,6 +32,7 @@ leave the parent's last windows without samples).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import queue
@@ -143,6 +144,10 @@ class SamplingProcess:
         spec: What the child samples.
         python: The interpreter to run the child with.
         clock: Seconds on a monotonic clock: the clock latencies are measured on.
+        process: A child already started without a spec (``python -m
+            whiskerid.hw._sampling_child``, its standard input and output pipes in text
+            mode), waiting for one on its standard input: it is sent the spec and used
+            instead of a new one (a new one when it has gone).
 
     Raises:
         SamplingError: While iterating, when the child could not start or died.
@@ -154,6 +159,7 @@ class SamplingProcess:
         *,
         python: str = sys.executable,
         clock: Callable[[], float] = time.perf_counter,
+        process: subprocess.Popen | None = None,
     ) -> None:
         self.spec = spec
         self.stats = SamplerStats()
@@ -163,7 +169,7 @@ class SamplingProcess:
         self._clock = clock
         self._ended = False
         self._stop: Callable[[], bool] = lambda: False
-        self._proc = subprocess.Popen(
+        self._proc = _given(process, spec) or subprocess.Popen(
             [python, "-m", "whiskerid.hw._sampling_child", spec.to_json()],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
@@ -262,6 +268,24 @@ class SamplingProcess:
         self._reader.join(1.0)
         if proc.stdout is not None and not self._reader.is_alive():
             proc.stdout.close()
+
+
+def _given(proc: subprocess.Popen | None, spec: SamplerSpec) -> subprocess.Popen | None:
+    """A started child sent its spec, or None when there is none or it has gone."""
+    if proc is None:
+        return None
+    try:
+        assert proc.stdin is not None
+        proc.stdin.write(spec.to_json() + "\n")
+        proc.stdin.flush()
+        return proc
+    except OSError:  # it died (a broken pipe): a new one is started instead
+        proc.kill()
+        proc.wait()
+        for pipe in (proc.stdin, proc.stdout):
+            with contextlib.suppress(OSError):
+                pipe.close()
+        return None
 
 
 def serve(spec: SamplerSpec, fd: int) -> int:

@@ -2,6 +2,7 @@
 start-up errors said, and the stream's latencies counted from a sample's arrival."""
 
 import subprocess
+import sys
 import time
 
 import numpy as np
@@ -70,6 +71,48 @@ def test_a_parent_that_goes_away_leaves_no_sampling_child(slow_sine):
         pytest.fail("the child kept sampling after its parent's pipe closed")
     finally:
         proc.close()
+
+
+def _waiting_child():
+    """A child started without a spec, as ``whiskerid stream`` starts it before its imports."""
+    return subprocess.Popen([sys.executable, "-m", "whiskerid.hw._sampling_child"],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                            bufsize=1)  # fmt: skip
+
+
+def test_a_child_started_early_samples_once_sent_its_spec(slow_sine):
+    path, _, _ = slow_sine
+    early = _waiting_child()
+    time.sleep(0.3)  # it waits for the spec: nothing sampled, nothing written
+    assert early.poll() is None
+    proc = hw.SamplingProcess(hw.SamplerSpec(replay=str(path), rate_hz=200.0, duration_s=0.5),
+                              process=early)  # fmt: skip
+    got = [s for s in proc if isinstance(s, hw.Sample)]
+    proc.close()
+    assert proc._proc is early and early.returncode == 0
+    assert proc.stats.samples == len(got) >= 0.5 * 100
+
+
+def test_a_child_started_early_and_not_sent_a_spec_exits_without_sampling(slow_sine):
+    early = _waiting_child()
+    early.stdin.close()  # the stream stopped on bad input (or died) before it sampled
+    try:
+        assert early.wait(timeout=30) == 0
+        assert early.stdout.read() == ""
+    finally:
+        early.stdout.close()
+
+
+def test_a_child_started_early_that_died_is_replaced(slow_sine):
+    path, _, _ = slow_sine
+    early = _waiting_child()
+    early.kill()
+    early.wait()
+    proc = hw.SamplingProcess(hw.SamplerSpec(replay=str(path), rate_hz=200.0, duration_s=0.3),
+                              process=early)  # fmt: skip
+    got = [s for s in proc if isinstance(s, hw.Sample)]
+    proc.close()
+    assert proc._proc is not early and proc._proc.returncode == 0 and got
 
 
 def test_a_child_that_cannot_start_says_why(tmp_path):

@@ -381,8 +381,12 @@ def test_a_restart_reuses_the_compile_cache(tiny_model, tmp_path):
     """The stream's compiled functions land in --compile-cache; a second start loads them."""
     rec = tmp_path / "r.csv"
     assert main(["record", str(rec), "--emulate", "brick", "--fast", "--duration", "3"]) == 0
+    # A resonance fitted per window runs compiled (the default features run in NumPy).
+    model = tmp_path / "modal"
+    assert main(["train", str(tiny_model.parent / "ds"), "--out", str(model), "--modal-fit",
+                 "--seed", "0", "--quiet"]) == 0  # fmt: skip
     cache = tmp_path / "cache"
-    argv = [sys.executable, "-m", "whiskerid.cli", "stream", "--model", str(tiny_model),
+    argv = [sys.executable, "-m", "whiskerid.cli", "stream", "--model", str(model),
             "--replay", str(rec), "--fast", "--duration", "2",
             "--compile-cache", str(cache)]  # fmt: skip
     times = []

@@ -1,6 +1,7 @@
 """The stream's start: the model loads on a thread while sampling starts, with the errors a
 load always gave, and nothing it does not need (SciPy's statistics) is imported."""
 
+import argparse
 import subprocess
 import sys
 import threading
@@ -8,7 +9,7 @@ import threading
 import numpy as np
 import pytest
 
-from whiskerid.cli import _stream, main
+from whiskerid.cli import _main, _prestart, _stream, main
 from whiskerid.io import Recording, write_csv
 
 
@@ -61,6 +62,47 @@ def test_a_model_that_cannot_load_is_refused_in_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
     assert "no classifier model here" in err
+
+
+def test_a_refused_stream_ends_the_sampling_process_it_started_early(tmp_path, monkeypatch,
+                                                                    capsys):  # fmt: skip
+    started = []
+
+    def spy(args):  # the real prestart, keeping the child it started
+        _prestart.prestart(args)
+        started.append(getattr(args, "_sampling_child", None))
+
+    monkeypatch.setattr(_main, "prestart", spy)
+    t = np.arange(400) / 200.0
+    rec = tmp_path / "sine.csv"
+    write_csv(rec, Recording(t, {"A0": np.zeros(400, dtype=int)}, {"units": "code"}))
+    assert main(["stream", "--model", str(tmp_path / "m"), "--replay", str(rec)]) == 2
+    assert "no classifier model here" in capsys.readouterr().err
+    (child,) = started
+    assert child is not None and child.returncode == 0  # started, then ended unused
+
+
+def test_the_child_started_before_parsing_goes_to_the_stream_that_uses_one(monkeypatch):
+    monkeypatch.setattr(sys, "argv", ["/usr/bin/whiskerid", "stream", "--model", "m"])
+    _prestart.spawn_early()
+    (early,) = _prestart._early
+    stream = argparse.Namespace(command="stream", fast=False, simulate=None)
+    _prestart.prestart(stream)
+    assert _prestart.take(stream) is early and not _prestart._early
+    _prestart._end(early)
+    assert early.returncode == 0  # its input ended before a spec: it exits unused
+    monkeypatch.setattr(sys, "argv", ["/usr/bin/whiskerid", "stream", "--fast"])
+    _prestart.spawn_early()  # --fast samples in the stream's own process
+    assert not _prestart._early
+
+
+def test_a_child_started_early_for_a_stream_that_samples_itself_is_ended(monkeypatch):
+    monkeypatch.setattr(sys, "argv", ["/usr/bin/whiskerid", "stream"])
+    _prestart.spawn_early()
+    (early,) = _prestart._early
+    simulated = argparse.Namespace(command="stream", fast=False, simulate="brick")
+    _prestart.prestart(simulated)
+    assert early.returncode == 0 and _prestart.take(simulated) is None
 
 
 def test_the_classifier_does_not_import_scipy_stats():

@@ -45,6 +45,7 @@ from ._common import (
     start_command,
     start_progress,
 )
+from ._prestart import prestart
 
 # Reported on one line with exit status 2. The library's own errors (RecordError,
 # RecordingError, CalibrationError, ModelError, PosteriorError) are ValueErrors. The readers
@@ -124,6 +125,7 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``whiskerid`` command; returns the exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    prestart(args)  # a stream's sampling process imports while this one does
     enable_compile_cache()
     start = time.perf_counter()
     try:

@@ -23,6 +23,7 @@ from ._common import (
     model_folder,
     record_or_paper,
 )
+from ._prestart import discard, take
 
 
 def add_parser(sub) -> None:
@@ -143,8 +144,11 @@ def run(args) -> dict:
     the stream stops at the next sample, prints its summary and exits 130 or 143.
     """
     policy = interrupts()
-    with policy.deferred():
-        out = _stream(args, policy)
+    try:
+        with policy.deferred():
+            out = _stream(args, policy)
+    finally:
+        discard(args)  # a sampling process started early that the stream did not take
     if policy.signum is not None:
         if args.json:
             print(json.dumps(json_safe({"command": "stream", **out}), indent=2, allow_nan=False))
@@ -209,7 +213,7 @@ def _stream_from(hw, args, policy, inputs, cfg, speed, replayed, model, cache, l
     if child:
         # Sampling starts now, in a process of its own: the first window fills while JAX
         # starts and the model loads, and the model never holds up the sampling schedule.
-        samples = hw.SamplingProcess(spec)
+        samples = hw.SamplingProcess(spec, process=take(args))
     sink = recorder = None
     try:
         warm = isinstance(model, _ModelLoader)
