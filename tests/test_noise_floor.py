@@ -81,6 +81,18 @@ def test_f_test_false_alarm_rate_and_power():
     assert not NF.floor_test([per], [obs], n_params=6)["recordings"][0]["tested"]
 
 
+def test_a_residual_far_above_a_tiny_floor_is_rejected_not_an_overflow():
+    """A fit to noise beside a near-silent hold: the variance ratio is beyond a float (it
+    raised OverflowError); an exactly constant hold is not tested."""
+    rng = np.random.default_rng(6)
+    per, obs = _fake(1e150, 1e-160, 600, 80, rng, name="noise")
+    res = NF.floor_test([per], [obs], n_params=6)
+    assert res["rejects"] == ["noise"] and res["recordings"][0]["p_value"] == 0.0
+    obs.quiet = np.zeros(80)
+    obs.y = rng.normal(0, 50, 600)  # not on a converter's codes: no rounding floor either
+    assert not NF.floor_test([per], [obs], n_params=6)["recordings"][0]["tested"]
+
+
 def test_quiet_stretch_stops_before_a_tap_and_skips_unseen_releases():
     fs, f = 860.0, 80.0
     t = np.arange(2000) / fs

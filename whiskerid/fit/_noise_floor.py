@@ -124,11 +124,17 @@ def floor_test(per_rec: list[dict], obs, n_params: int) -> dict:
             out.append({"name": o.name, "tested": False, "why": "no quiet stretch"})
             continue
         floor = noise_floor(quiet, quantum(np.concatenate([np.asarray(o.y), quiet])))
+        if not floor["sigma"] > 0:  # an exactly constant stretch, no converter step known
+            out.append({"name": o.name, "tested": False, "why": "a quiet stretch with no noise"})
+            continue
         n = int(o.t.size)
         dof = max(n - p_each, 1.0)
         s2 = r["rms_residual"] ** 2 * n / dof
-        ratio = float(np.sqrt(s2) / max(floor["sigma"], 1e-300))
-        p = float(f_sf(ratio**2, dof, floor["nu"]))
+        # in NumPy: a residual far above a tiny floor gives inf, not an OverflowError
+        with np.errstate(over="ignore"):
+            ratio2 = float(np.float64(s2) / np.float64(floor["sigma"]) ** 2)
+        ratio = float(np.sqrt(ratio2))
+        p = float(f_sf(ratio2, dof, floor["nu"]))
         row = {"name": o.name, "tested": True, "rms_residual": float(np.sqrt(s2)),
                "floor": floor["sigma"], "floor_noise": floor["sigma_noise"],
                "quantum": floor["quantum"], "quiet_samples": floor["m"], "nu": floor["nu"],
