@@ -281,7 +281,8 @@ def observation_from_recording(
         source=None if rec.source is None else str(rec.source),
     )
     if t_start is None and excitation == "decay":
-        return _decay_windows(obs, t_end, path, first_only=True)[0]
+        return _decay_windows(obs, t_end, path, first_only=True,
+                              settle_s=_settle_s(obs, record))[0]  # fmt: skip
     return _cut(obs, t_start, t_end, path)
 
 
@@ -305,7 +306,8 @@ def observations_from_recording(
     obs = observation_from_recording(rec, record, t_start=rec.t[0], **options)
     path = rec.source or "recording"
     if t_start is None and obs.excitation == "decay":
-        return _decay_windows(obs, t_end, path, first_only=False)
+        return _decay_windows(obs, t_end, path, first_only=False,
+                              settle_s=_settle_s(obs, record))  # fmt: skip
     return [_cut(obs, t_start, t_end, path)]
 
 
@@ -341,8 +343,22 @@ def _cut(obs: Observation, t_start, t_end, path) -> Observation:
     return obs
 
 
-def _decay_windows(obs: Observation, t_end, path, *, first_only: bool) -> list[Observation]:
-    """The free decays of a decay recording, each as its own observation."""
+def _settle_s(obs: Observation, record: WhiskerRecord) -> float:
+    """How long after a decay's first sample its samples may still hold the release (s).
+
+    The ADS1115 averages its input over the conversion period before each sample: the first
+    sample of a decay (the first the hold does not predict) averages over the release
+    itself, part held and part free, which the free-decay model cannot describe (at 860 Hz
+    and 60 dB it left residuals 1.7 times the noise). Samples whose conversion may have
+    begun before that first sample are left out; other observables are instantaneous.
+    """
+    return float(record.adc.conversion_time_s) if obs.observable == "adc" else 0.0
+
+
+def _decay_windows(obs: Observation, t_end, path, *, first_only: bool,
+                   settle_s: float = 0.0) -> list[Observation]:  # fmt: skip
+    """The free decays of a decay recording, each as its own observation (each starting
+    ``settle_s`` after its first sample, see :func:`_settle_s`)."""
     if t_end is not None:
         obs = obs.window(None, t_end)
     decays = [
@@ -362,7 +378,8 @@ def _decay_windows(obs: Observation, t_end, path, *, first_only: bool) -> list[O
     out = []
     for k, d in enumerate(decays):
         name = obs.name if len(decays) == 1 else f"{obs.name}#{k + 1}"
-        o = obs.window(d.start_s, d.end_s)
+        # a sample exactly one conversion after the first is clear of the release
+        o = obs.window(d.start_s + settle_s * (1.0 - 1e-9), d.end_s)
         quiet = quiet_stretch(obs.t, obs.y, found, k)
         out.append(_replace(o, name=name, selection=f"decay {d.describe()}", quiet=quiet))
     return out
