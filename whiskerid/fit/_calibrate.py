@@ -275,6 +275,9 @@ def calibrate(
         white, *_ = _report(record, problem, res.reported, cov_white, static, nominal, tol)
         for k in params:
             params[k]["std_white"] = white[k]["std"]
+            # never below the white-noise 1σ, to the last digit (the floor is applied to the
+            # covariance; the reported quantities' transform can round it an ulp under)
+            params[k]["std"] = max(params[k]["std"], white[k]["std"])
     diagnostics = fit_diagnostics(per_rec, obs, res, resid, s2=s2, gcos=gcos,
                                   uncertainty=uncertainty)  # fmt: skip
     warnings = _poor_fit_warnings(per_rec)
