@@ -379,7 +379,7 @@ def test_a_long_command_says_what_it_is_doing_unless_quiet(tmp_path, monkeypatch
     import time
 
     import whiskerid.cli._calibrate as c
-    from whiskerid.cli import _common
+    from whiskerid.cli import _common, _progress
 
     def slow(args, *rest):
         _common.progress_step("fitting")
@@ -388,7 +388,7 @@ def test_a_long_command_says_what_it_is_doing_unless_quiet(tmp_path, monkeypatch
         return {}
 
     monkeypatch.setattr(c, "_cmd_calibrate", slow)
-    monkeypatch.setattr(_common, "STATUS_DELAY_S", 0.0)
+    monkeypatch.setattr(_progress, "STATUS_DELAY_S", 0.0)  # where start_progress reads it
     argv = ["calibrate", "x.csv", "--whisker", PAPER, "--out", str(tmp_path / "o.toml")]
     assert main(argv + ["--quiet"] * quiet) == 0
     err = capsys.readouterr().err
