@@ -209,3 +209,20 @@ def decay_recording(t, modes, offsets=None):
         avg_offsets=None if offsets is None else jnp.asarray(offsets), base_acc=None,
         excitation="decay", observable="deflection", forced="none", n_cols=2 + 2 * modes,
     )  # fmt: skip
+
+
+def one_step_chain(path):
+    """An HDF5 chain of 4 walkers in 2 dimensions, grown for two steps, with one step saved
+    through the sampler's checked backend: ``(backend, state)``, ready for a second
+    ``save_step`` that a full disk or a file-size limit must stop."""
+    import emcee
+
+    from whiskerid.posterior import _sample
+
+    be = _sample._checked_backend(emcee)(str(path), name="whiskerid")
+    be.reset(4, 2)
+    be.grow(2, None)
+    state = emcee.State(np.ones((4, 2)), log_prob=np.zeros(4),
+                        random_state=np.random.RandomState(0).get_state())  # fmt: skip
+    be.save_step(state, np.ones(4, bool))
+    return be, state

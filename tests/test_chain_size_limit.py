@@ -7,20 +7,15 @@ import resource
 
 import numpy as np
 import pytest
+from helpers import one_step_chain
 
 
 def test_the_chain_stops_whole_before_the_file_size_limit(tmp_path, monkeypatch):
     import emcee
 
-    from whiskerid.posterior import _sample
 
     path = tmp_path / "chain.h5"
-    be = _sample._checked_backend(emcee)(str(path), name="whiskerid")
-    be.reset(4, 2)
-    be.grow(2, None)
-    state = emcee.State(np.ones((4, 2)), log_prob=np.zeros(4),
-                        random_state=np.random.RandomState(0).get_state())  # fmt: skip
-    be.save_step(state, np.ones(4, bool))
+    be, state = one_step_chain(path)
     limit = path.stat().st_size + 1000  # room for a little, not for a step's margin
     monkeypatch.setattr(resource, "getrlimit", lambda which: (limit, limit))
     with pytest.raises(OSError, match="file-size limit") as err:

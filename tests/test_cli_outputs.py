@@ -7,6 +7,7 @@ import signal
 
 import numpy as np
 import pytest
+from helpers import one_step_chain
 
 import whiskerid as wi
 from whiskerid.cli import main
@@ -124,12 +125,7 @@ def test_the_chain_stops_whole_before_the_disk_is_full(tmp_path, monkeypatch):
     from whiskerid.posterior import _sample
 
     path = tmp_path / "chain.h5"
-    be = _sample._checked_backend(emcee)(str(path), name="whiskerid")
-    be.reset(4, 2)
-    be.grow(2, None)
-    state = emcee.State(np.ones((4, 2)), log_prob=np.zeros(4),
-                        random_state=np.random.RandomState(0).get_state())  # fmt: skip
-    be.save_step(state, np.ones(4, bool))
+    be, state = one_step_chain(path)
     monkeypatch.setattr(_sample, "CHAIN_FREE_BYTES", 1 << 62)  # no disk has that much
     with pytest.raises(OSError, match="stopped before writing step 2") as err:
         be.save_step(state, np.ones(4, bool))
