@@ -13,7 +13,6 @@ from helpers import one_step_chain
 def test_the_chain_stops_whole_before_the_file_size_limit(tmp_path, monkeypatch):
     import emcee
 
-
     path = tmp_path / "chain.h5"
     be, state = one_step_chain(path)
     limit = path.stat().st_size + 1000  # room for a little, not for a step's margin
