@@ -45,6 +45,9 @@ ZETA_PLAUSIBLE = 0.2
 F1_RATIO = (0.4, 2.5)
 #: A decay's first mode must carry at least this share of the largest mode's RMS.
 MODE1_SHARE = 0.2
+#: A residual line counts only where it holds at least this share of the data's power in its
+#: bin (-40 dB).
+SIGNAL_SHARE = 1e-4
 #: Relative 1σ of f_1 and of ζ above which a fit is imprecise.
 F1_REL_STD, ZETA_REL_STD = 0.005, 0.10
 
@@ -73,22 +76,41 @@ def residual_peak(
     if n < 64:
         return None
     dt = float(np.median(np.diff(t)))
-    ru = np.interp(t[0] + dt * np.arange(n), t, r)
+    grid = t[0] + dt * np.arange(n)
     window = np.hanning(n)
-    p = np.abs(np.fft.rfft((ru - ru.mean()) * window)) ** 2
-    p = p[1:]  # DC and drift are the offset's business
+    p = _periodogram(np.interp(grid, t, r), window)
     floor = float(np.median(p))
     if y is not None:
-        step = 2.0 * quantum(np.asarray(y, dtype=float))
+        y = np.asarray(y, dtype=float)
+        step = 2.0 * quantum(y)
         # the median of an exponential bin of mean q²/12 Σw² is ln 2 times that
         floor = max(floor, np.log(2.0) * step**2 / 12.0 * float(np.sum(window**2)))
     if floor <= 0:
         return None
-    i = int(np.argmax(p))
-    ratio = float(p[i] / floor)
-    if ratio < (np.log(p.size) + 8.0) / np.log(2.0):
+    ratio = p / floor  # bin k + 1 is k + 1 cycles in the record
+    if y is not None:
+        # A line is left by the model only where the residual holds a share of the data's
+        # own power at that frequency: an unmodelled mode, a drive or hum is (nearly) all
+        # of the data there. A misfit 40 dB under the data at every frequency (a noiseless
+        # simulation fitted with fewer modes than made it, whose noise floor is zero) is
+        # not a line the data show.
+        ratio = np.where(
+            p >= SIGNAL_SHARE * _periodogram(np.interp(grid, t, y), window), ratio, 0.0
+        )
+    i = int(np.argmax(ratio))
+    if ratio[i] < (np.log(p.size) + 8.0) / np.log(2.0):
         return None
-    return (i + 1) / (n * dt), ratio
+    return (i + 1) / (n * dt), float(ratio[i])
+
+
+def _periodogram(x: np.ndarray, window: np.ndarray) -> np.ndarray:
+    """Hann periodogram without the zero-frequency bin, of ``x`` less its straight line.
+    An offset and a drift are the model's nuisances, not lines; through the window a ramp
+    (or a constant stretch, a decay rung down onto its offset) fills the lowest bins and
+    would read as a line at a cycle or two per record."""
+    s = np.linspace(-1.0, 1.0, x.size)
+    x = x - np.polyval(np.polyfit(s, x, 1), s)
+    return np.abs(np.fft.rfft(x * window))[1:] ** 2
 
 
 def hac_lag(r: np.ndarray) -> int:
