@@ -304,17 +304,18 @@ def test_linear_pluck_is_not_marked_amplitude_dependent():
 @pytest.mark.slow
 def test_term_selection_drops_what_the_data_do_not_need():
     """A SciPy pluck with velocity-squared damping only (ζ 1.25× at release, no stiffness
-    term): from quadratic + cubic + kappa, the information criterion keeps the damping and
-    drops both stiffness terms, and the chosen fit recovers ζ₀ and c within 3σ."""
+    term): from quadratic + cubic, the information criterion keeps the damping and drops the
+    stiffness term, and the chosen fit recovers ζ₀ and c within 3σ. (Two candidates, not
+    all three: each step is a fit of its own, compiled for its terms.)"""
     from whiskerid.fit import calibrate_nonlinear_selected
 
     record, obs, truth = _pluck(rate=200.0, rise=0.0, zq=0.25, seed=4)
     lin = calibrate(record, obs, n_modes=1)
-    nl = calibrate_nonlinear_selected(lin, [obs], candidates=("quadratic", "cubic", "kappa"))
+    nl = calibrate_nonlinear_selected(lin, [obs], candidates=("quadratic", "cubic"))
     sel = nl.diagnostics["term_selection"]
     assert sel["chosen"] == ["quadratic"], sel
     assert sel["needed"]
-    assert [s["dropped"] for s in sel["steps"]][:2] in (["cubic", "kappa"], ["kappa", "cubic"])
+    assert [s["dropped"] for s in sel["steps"]] == ["cubic", None]
     for name in ("zeta", "quadratic_per_m"):
         p = nl.params[name]
         assert abs(p["value"] - truth[name]) < 3 * p["std"], (name, p, truth[name])
