@@ -62,7 +62,7 @@ def windows(o, f1: float) -> dict:
 
 LAWS = {
     "kappa+cubic": (lambda p, a, t: p[0] + p[1] * a + p[2] * a**2, [0.0, 0.0]),
-    "power": (lambda p, a, t: p[0] * (1 + p[1] * a ** p[2]), [-1e-3, 0.5]),
+    "power": (lambda p, a, t: p[0] * (1 + p[1] * np.abs(a) ** p[2]), [-1e-3, 0.5]),
     "kappa+cubic+drift": (lambda p, a, t: p[0] + p[1] * a + p[2] * a**2 + p[3] * t, [0, 0, 0]),
     "log": (lambda p, a, t: p[0] + p[1] * np.log(a), [0.0]),
 }
@@ -75,8 +75,11 @@ def compare_laws(w: dict) -> dict:
     sigma = 1.4826 * np.median(np.abs(np.diff(f, 2))) / np.sqrt(6)
     out = {"n_windows": int(f.size), "window_sigma_hz": float(sigma)}
     for name, (fun, rest) in LAWS.items():
-        r = least_squares(lambda p, fun=fun: (fun(p, a, t) - f) / sigma, [f[-1], *rest],
-                          x_scale="jac")  # fmt: skip
+        # the power law from several exponents (its cost has more than one valley)
+        starts = [[f[-1], -1e-3, p] for p in (0.25, 0.5, 1.0, 1.5)] if name == "power" else [
+            [f[-1], *rest]]  # fmt: skip
+        r = min((least_squares(lambda p, fun=fun: (fun(p, a, t) - f) / sigma, x0, x_scale="jac")
+                 for x0 in starts), key=lambda r: r.cost)  # fmt: skip
         chi2 = float(np.sum(r.fun**2))
         out[name] = {"chi2": chi2, "bic": chi2 + r.x.size * np.log(f.size),
                      "params": r.x.tolist()}  # fmt: skip

@@ -48,7 +48,7 @@ from ._decay import conversion_average
 from ._observation import CalibrationError
 from ._problem import FitProblem, recording_design
 from ._short_windows import short_window_points
-from ._spectral_floor import spectral_whiteness
+from ._spectral_floor import residual_spectra
 
 #: The nonlinear terms fitted by default, in the order of the parameter vector ``nl``.
 NL_TERMS = ("cubic", "quadratic", "coulomb")
@@ -424,12 +424,6 @@ def calibrate_nonlinear(
         # RSS of the linear fit over the nonlinear one (normalised data, unweighted)
         "linear_rss_over_nonlinear": _rss_linear(linear)
         / max(_rss_nonlinear(problem, optimum), 1e-300),
-        # the residual's spectrum near each mode against the sensor noise's (lag-1 is no
-        # whiteness measure for a misfit at the whisker's own frequency)
-        "residual_spectrum": [
-            spectral_whiteness(tt, y - m, _lines(params, nm), quiet=getattr(o, "quiet", None))
-            for (tt, y, m), o in zip(curves, obs, strict=True)
-        ],
     }
     warnings = _poor_fit_warnings(per_rec)
     checks: dict[str, str] = {}
@@ -453,13 +447,10 @@ def calibrate_nonlinear(
         problem=problem, optimum=optimum, covariance=cov, backbone=backbone, linear=linear,
     )  # fmt: skip
     out.record = _updated_record(out)
+    # the residual's spectrum near each mode against the sensor noise's (lag-1 is no
+    # whiteness measure for a misfit at the whisker's own frequency)
+    out.diagnostics["residual_spectrum"] = residual_spectra(out, obs)
     return out
-
-
-def _lines(params, n_modes: int) -> list[float]:
-    """The fitted modes' frequencies (Hz): f₀ and the higher modes'."""
-    names = ["f1_hz"] + [f"f{k}_hz" for k in range(2, n_modes + 1)]
-    return [float(params[k]["value"]) for k in names if k in params]
 
 
 def _rss_linear(cal: Calibration) -> float:

@@ -141,3 +141,15 @@ def spectral_whiteness(t, residual, lines_hz, *, quiet=None) -> dict:
         out["worst_ratio"] = max(b["ratio"] for b in out["bands"])
         out["white"] = all(b["white"] for b in out["bands"])
     return out
+
+
+def residual_spectra(cal, obs) -> list[dict]:
+    """:func:`spectral_whiteness` of every recording of a calibration, at its fitted modes'
+    frequencies (``f1_hz``, ``f2_hz`` …), against each recording's quiet stretch when it has
+    one."""
+    names = ["f1_hz"] + [f"f{k}_hz" for k in range(2, 32)]
+    lines = [float(cal.params[k]["value"]) for k in names if k in cal.params]
+    return [
+        spectral_whiteness(t, y - m, lines, quiet=getattr(o, "quiet", None))
+        for (t, y, m), o in zip(cal.curves, obs, strict=True)
+    ]
