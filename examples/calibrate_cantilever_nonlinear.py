@@ -7,12 +7,19 @@ detection) is fitted with ``model="linear"`` and ``model="nonlinear"``; for each
 gives status, values with 1σ, the residuals' lag-1 autocorrelation and their spectrum near
 f₁ (the share of the residual variance within ±1 Hz of f₁, and the strongest line), the
 backbone at the largest and smallest amplitude, and the short-window damped-sine fits
-(frequency and damping against amplitude) binned beside the backbone. Then all repeats of
-one length are fitted jointly and the record saved as
-``fits/cantilever-aluminium-<L>cm-nonlinear.toml``, with a plot.
+(frequency and damping against amplitude) binned beside the backbone. ``residual_to_noise``
+is the fair whiteness measure: the residual's power spectral density within ±12.5 % of f1 and
+of the second bending mode's line, over the sensor noise's density there (from the residual's
+spectrum beside the band: these recordings ring to their end and have no quiet stretch); 1 is
+white. For the lengths in ``--two-modes`` (default 50 cm, whose second mode at 39 Hz holds most
+of a one-mode fit's residual) a third fit adds a free second mode (its f2 and ζ2 fitted,
+started at the data's line; the beam model puts it 0.8 Hz off). Then all repeats of one length
+are fitted jointly and the record saved as ``fits/cantilever-aluminium-<L>cm-nonlinear.toml``,
+with a plot.
 
     .venv/bin/python examples/calibrate_cantilever_nonlinear.py [--lengths 30 50] [--stride 4]
-        [--terms kappa quadratic cubic | auto] [--json-out r.json] [--figure f.png]
+        [--terms kappa quadratic cubic | auto] [--two-modes 50] [--json-out r.json]
+        [--figure f.png]
 """
 
 import argparse
