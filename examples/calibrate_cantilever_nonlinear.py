@@ -7,12 +7,19 @@ detection) is fitted with ``model="linear"`` and ``model="nonlinear"``; for each
 gives status, values with 1σ, the residuals' lag-1 autocorrelation and their spectrum near
 f₁ (the share of the residual variance within ±1 Hz of f₁, and the strongest line), the
 backbone at the largest and smallest amplitude, and the short-window damped-sine fits
-(frequency and damping against amplitude) binned beside the backbone. Then all repeats of
-one length are fitted jointly and the record saved as
-``fits/cantilever-aluminium-<L>cm-nonlinear.toml``, with a plot.
+(frequency and damping against amplitude) binned beside the backbone. ``residual_to_noise``
+is the fair whiteness measure: the residual's power spectral density within ±12.5 % of f1 and
+of the second bending mode's line, over the sensor noise's density there (from the residual's
+spectrum beside the band: these recordings ring to their end and have no quiet stretch); 1 is
+white. For the lengths in ``--two-modes`` (default 50 cm, whose second mode at 39 Hz holds most
+of a one-mode fit's residual) a third fit adds a free second mode (its f2 and ζ2 fitted,
+started at the data's line; the beam model puts it 0.8 Hz off). Then all repeats of one length
+are fitted jointly and the record saved as ``fits/cantilever-aluminium-<L>cm-nonlinear.toml``,
+with a plot.
 
     .venv/bin/python examples/calibrate_cantilever_nonlinear.py [--lengths 30 50] [--stride 4]
-        [--terms kappa quadratic cubic | auto] [--json-out r.json] [--figure f.png]
+        [--terms kappa quadratic cubic | auto] [--two-modes 50] [--json-out r.json]
+        [--figure f.png]
 """
 
 import argparse
@@ -29,6 +36,9 @@ import itertools
 from calibrate_cantilever import ROOT, beam_record, observation
 
 import whiskerid as wi
+from whiskerid.fit import calibrate_nonlinear
+from whiskerid.fit._nl_free_modes import _line_near
+from whiskerid.fit._spectral_floor import spectral_whiteness
 from whiskerid.model._nonlinear import COEFFICIENTS
 
 
@@ -68,7 +78,16 @@ def residual_spectrum(
     }  # fmt: skip
 
 
-def summary_of(cal, o) -> dict:
+def noise_ratio(cal, o, lines_hz) -> dict:
+    """The residual's PSD against the sensor noise's near f1 and near the second mode's
+    line (:func:`whiskerid.fit._spectral_floor.spectral_whiteness`): ratio 1 is white."""
+    s = spectral_whiteness(o.t, o.y - cal.curves[0][2], lines_hz, quiet=o.quiet)
+    return {"reference": s["reference"], "white": s["white"],
+            "bands": [{k: b[k] for k in ("f_hz", "ratio", "ratio_std", "p_value", "white")}
+                      for b in s["bands"]]}  # fmt: skip
+
+
+def summary_of(cal, o, lines_hz=()) -> dict:
     p = cal.params
     out = {
         "status": cal.status,
@@ -79,7 +98,11 @@ def summary_of(cal, o) -> dict:
         "residual_peak_hz_ratio": cal.per_recording[0].get("residual_peak"),
         "residual_share_near_f1": near_f1_share(o, cal.curves[0][2], p["f1_hz"]["value"]),
         "rms_residual_m_s2": cal.diagnostics["rms_residual"][0],
+        "residual_to_noise": noise_ratio(cal, o, [p["f1_hz"]["value"], *lines_hz]),
     }
+    for k in ("f2_hz", "zeta_2"):
+        if k in p:
+            out[k] = [p[k]["value"], p[k]["std"]]
     test = cal.diagnostics.get("amplitude_test")
     if test:
         out["amplitude_test_p"] = [test["nonlinear"]["p_value"], test["split"]["p_value"]]
@@ -98,6 +121,11 @@ def summary_of(cal, o) -> dict:
         }
         out["windows_vs_backbone"] = binned_windows(b)
     return out
+
+
+def second_mode_hz(record) -> float:
+    """The record's beam model's second natural frequency (Hz)."""
+    return float(record.replace(n_modes=2).whisker().natural_frequencies_hz[1])
 
 
 def binned_windows(b: dict, bins: int = 5) -> list[dict]:
@@ -154,7 +182,8 @@ def draw_backbones(summary: dict, path: Path) -> None:
     fig, axes = plt.subplots(2, len(lengths), figsize=(5.2 * len(lengths), 6.4), squeeze=False)
     for j, length in enumerate(lengths):
         for i, row in enumerate(summary[length]["recordings"]):
-            b = row["nonlinear"].get("backbone")
+            fit = row.get("nonlinear_2_modes", row["nonlinear"])  # the fuller model if fitted
+            b = fit.get("backbone")
             if not b:
                 continue
             color = f"C{i}"
@@ -165,6 +194,8 @@ def draw_backbones(summary: dict, path: Path) -> None:
                 ax.plot(np.asarray(b["amplitude_m"]) * 1e3, b[key], "-", color=color,
                         label=row["file"][:14] if key == "f_hz" else None)  # fmt: skip
         terms = ", ".join(summary[length].get("terms", []))
+        if "nonlinear_2_modes" in summary[length]["recordings"][0]:
+            terms += "; free 2nd mode"
         axes[0, j].set_title(f"{length}: fit ({terms}), points: windows", fontsize=9)
         axes[1, j].set_xlabel("mode 1 tip amplitude a (mm)")
         axes[0, j].set_ylabel("f(a) (Hz)")
@@ -192,6 +223,9 @@ def main(argv=None) -> int:
         default=["kappa", "quadratic", "cubic"],
         help="nonlinear terms (or 'auto': chosen by BIC, several fits each)",
     )
+    ap.add_argument("--two-modes", type=int, nargs="*", default=[50],
+                    help="lengths (cm) also fitted with a free second mode (f2, zeta2 "
+                         "fitted, started at the data's line)")  # fmt: skip
     ap.add_argument("--json-out", type=Path, help="also write the summary here")
     ap.add_argument("--figure", type=Path, help="draw f(a), zeta(a) against short windows here")
     ap.add_argument(
@@ -219,16 +253,27 @@ def main(argv=None) -> int:
         paths = sorted((args.data / f"{length_cm}cm").glob("*.npy"))
         obs = [thin(observation(p), args.stride) for p in paths]
         rows = []
+        # the second bending mode's line in the data (the beam puts it 2-5 % off)
+        f2_line = _line_near(obs, second_mode_hz(record))
         for o in obs:
             lin = wi.calibrate(record, o, n_modes=1)
             nl = wi.calibrate(record, o, n_modes=1, model="nonlinear", nl_terms=terms)
-            rows.append({"file": o.name, "linear": summary_of(lin, o),
-                         "nonlinear": summary_of(nl, o)})  # fmt: skip
+            rows.append({"file": o.name, "linear": summary_of(lin, o, [f2_line]),
+                         "nonlinear": summary_of(nl, o, [f2_line])})  # fmt: skip
+            if length_cm in args.two_modes:
+                lin2 = wi.calibrate(record, o, n_modes=2)
+                nl2 = calibrate_nonlinear(lin2, [o], terms=terms, free_modes=True)
+                rows[-1]["nonlinear_2_modes"] = summary_of(nl2, o, [f2_line])
+                print(f"  two free modes: {nl2.status} f0 {rows[-1]['nonlinear_2_modes']['f1_hz']}"
+                      f" zeta0 {rows[-1]['nonlinear_2_modes']['zeta']} f2 "
+                      f"{rows[-1]['nonlinear_2_modes'].get('f2_hz')}", file=sys.stderr)  # fmt: skip
             print(f"{length_cm} cm {o.name}: linear {lin.status} zeta {rows[-1]['linear']['zeta']}"
                   f" | nonlinear {nl.status} f0 {rows[-1]['nonlinear']['f1_hz']} zeta0 "
                   f"{rows[-1]['nonlinear']['zeta']}", file=sys.stderr)  # fmt: skip
         out = {"recordings": rows, "terms": list(terms) if terms != "auto" else ["auto"]}
-        for model in ("linear", "nonlinear"):
+        for model in ("linear", "nonlinear", "nonlinear_2_modes"):
+            if model not in rows[0]:
+                continue
             out[f"{model}_repeats"] = {
                 "f1_hz": spread([r[model]["f1_hz"][0] for r in rows],
                                 [r[model]["f1_hz"][1] for r in rows]),

@@ -294,6 +294,7 @@ def finish(cal, observations, model: str, terms=None, *, resid=None, jac=None, c
     ``diagnostics["amplitude_test"]`` of the linear fit.
     """
     from ._nonlinear import NL_TERMS, calibrate_nonlinear
+    from ._spectral_floor import residual_spectra
 
     test = None
     if applies(cal):
@@ -309,6 +310,8 @@ def finish(cal, observations, model: str, terms=None, *, resid=None, jac=None, c
                 cal.status = "check"
             cal.record.extra["fit"]["status"] = cal.status
             cal.record.extra["fit"]["warnings"] = list(cal.warnings)
+    if applies(cal):
+        cal.diagnostics["residual_spectrum"] = residual_spectra(cal, observations)
     check_noise_floor(cal, observations, _LINEAR_ADVICE)
     if model == "linear" or (model == "auto" and not (test and test["rejects"])):
         return cal

@@ -48,6 +48,7 @@ from ._decay import conversion_average
 from ._observation import CalibrationError
 from ._problem import FitProblem, recording_design
 from ._short_windows import short_window_points
+from ._spectral_floor import residual_spectra
 
 #: The nonlinear terms fitted by default, in the order of the parameter vector ``nl``.
 NL_TERMS = ("cubic", "quadratic", "coulomb")
@@ -346,6 +347,7 @@ def calibrate_nonlinear(
     terms: tuple[str, ...] = NL_TERMS,
     solver: str = "levenberg-marquardt",
     max_steps: int = 400,
+    free_modes: bool = False,
 ) -> NonlinearCalibration:
     """Fit the nonlinear model, starting from a converged linear calibration.
 
@@ -357,6 +359,8 @@ def calibrate_nonlinear(
             (:func:`whiskerid.fit.calibrate_nonlinear_selected`).
         solver: As :func:`whiskerid.fit.calibrate`.
         max_steps: Solver step limit.
+        free_modes: Modes 2… (when the linear fit has them) with their own frequency and
+            damping, started at the data's line (:mod:`._nl_free_modes`), not the beam's.
 
     Returns:
         A :class:`NonlinearCalibration`; never raises on a failed solve (see ``status``).
@@ -365,7 +369,7 @@ def calibrate_nonlinear(
         from ._nl_select import calibrate_nonlinear_selected
 
         return calibrate_nonlinear_selected(linear, observations, solver=solver,
-                                            max_steps=max_steps)  # fmt: skip
+                                            max_steps=max_steps, free_modes=free_modes)  # fmt: skip
     obs = list(observations)
     base = linear.problem
     if base is None or linear.optimum is None:
@@ -388,6 +392,10 @@ def calibrate_nonlinear(
     problem = NonlinearProblem(base=base, a_ref=jnp.asarray(max(amps)), terms=terms)
     theta0 = dict(linear.optimum)
     theta0["nl"] = jnp.zeros(len(terms))
+    if free_modes and nm > 1:
+        from ._nl_free_modes import free_higher_modes
+
+        problem, theta0 = free_higher_modes(problem, theta0, obs)
     res = _solve(problem, problem.flatten(theta0), solver, max_steps)
     problem = _reweighted(problem, problem.unflatten(res.value))
     res = _solve(problem, res.value, solver, max_steps)
@@ -439,6 +447,9 @@ def calibrate_nonlinear(
         problem=problem, optimum=optimum, covariance=cov, backbone=backbone, linear=linear,
     )  # fmt: skip
     out.record = _updated_record(out)
+    # the residual's spectrum near each mode against the sensor noise's (lag-1 is no
+    # whiteness measure for a misfit at the whisker's own frequency)
+    out.diagnostics["residual_spectrum"] = residual_spectra(out, obs)
     return out
 
 
