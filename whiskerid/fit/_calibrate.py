@@ -47,6 +47,7 @@ from .._choices import PINS, SOLVERS
 from .._version import __version__
 from ..io import sha256_of
 from ..model import UniformBeam, WhiskerRecord
+from ._aot import with_compile_cache
 from ._checks import (
     LAG1_MAX,
     check_fit,
@@ -145,6 +146,7 @@ class Calibration:
 # --------------------------------------------------------------------------- calibrate
 
 
+@with_compile_cache  # its small eager programs too, not only the calibration's own
 @single_blas_thread(jax_lapack=True)  # small solves: threads only wait on a busy machine
 def calibrate(
     record: WhiskerRecord,
