@@ -244,8 +244,9 @@ def calibrate(
     pin = "geometry" if pin == "auto" else pin
     nominal = record.whisker().with_modes(n_modes)
     problem = FitProblem.from_observations(
-        record, obs, static=static, n_modes=n_modes, zeta_per_mode=zeta_per_mode, pin=pin
-    )
+        record, obs, static=static, n_modes=n_modes, zeta_per_mode=zeta_per_mode, pin=pin,
+        nominal=nominal,
+    )  # fmt: skip
     # One compiled program (module _core): the start grid over (κ, ζ) with the linear
     # coefficients solved exactly, the solve, each block (recording, static test) weighted by
     # its own residual scale (s² ≈ 1, a reduced χ²), and one Jacobian at the optimum for the
