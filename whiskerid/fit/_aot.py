@@ -24,8 +24,10 @@ loads them from its cache). ``WHISKERID_COMPILE_CACHE=off`` switches all of it o
 are then exported and compiled once per process).
 """
 
+import atexit
 import contextlib
 import functools
+import gc
 import hashlib
 import importlib.metadata
 import json
@@ -67,6 +69,19 @@ def cached_call(name: str, fn: Callable, args: tuple, *, static: tuple = ()):
     if program is None:
         program = _PROGRAMS[key] = _load_or_build(key, fn, treedef, leaves)
     return program(leaves)
+
+
+def _lighter_exit() -> None:
+    """At the interpreter's exit, collect what is garbage now (finalisers run as usual), then
+    freeze the rest, so that the collections while the modules are torn down do not walk
+    every object of JAX, XLA and equinox again: 0.25–0.35 s of CPU at the end of every script
+    that calibrated (the command line skips the teardown with ``os._exit``). Only objects
+    still alive at exit are affected, whose finalisers Python does not promise to run."""
+    gc.collect()
+    gc.freeze()
+
+
+atexit.register(_lighter_exit)
 
 
 def with_compile_cache(fn: Callable) -> Callable:
