@@ -200,7 +200,7 @@ def _spectral_candidates(observations, f1_nom, lo, hi):
 
     Returns:
         ``(f_hz, decay rate σ (1/s) or None, whether f is the unfolded alias)`` of each
-        candidate, in the order found (the largest peaks first); the envelopes' decay rates;
+        candidate, in the order found (the largest peaks first); each recording's decay rate;
         and the Nyquist frequency of the fastest free decay (infinite without one).
     """
     out, rates, nyquist = [], [], np.inf
@@ -214,6 +214,8 @@ def _spectral_candidates(observations, f1_nom, lo, hi):
         _, yu, rate = resample_uniform(o.t, yc)
         peaks = spectral_peaks_uniform(yu, rate) + spectral_peaks_uniform(yu, rate, "none")
         nyquist = rate / 2 if not np.isfinite(nyquist) else max(nyquist, rate / 2)
+        first = True  # the recording's decay rate: its largest peak's (the envelope is the
+        # whole signal's RMS, over windows of four periods: a weak low line's are too long)
         for fp in _unique(peaks):
             # the alias nearest the nominal, and the line itself (below the Nyquist frequency)
             f_true = unalias(fp, rate, f1_nom)
@@ -221,8 +223,9 @@ def _spectral_candidates(observations, f1_nom, lo, hi):
             if lo <= f_true <= hi:
                 z = envelope_zeta(o.t, o.y, fp, f_true)
                 sigma = None if z is None else z * 2 * np.pi * f_true
-                if sigma is not None:
+                if sigma is not None and first:
                     rates.append(sigma)
+                    first = False
             out.extend(
                 (f, sigma, f == f_true) for f in dict.fromkeys((f_true, fp)) if lo <= f <= hi
             )
