@@ -163,3 +163,48 @@ def test_a_fresh_interpreter_loads_the_calibration_without_tracing_it(tmp_path):
     assert [o.returncode for o in out] == [0, 0], out[1].stderr[-2000:]
     assert out[0].stdout == out[1].stdout  # the same fit, from the program on disk
     assert list((tmp_path / "programs").glob("*.jaxexport"))
+
+
+_LIBRARY = r"""
+import sys
+import jax
+import whiskerid as wi
+from whiskerid.fit import observations_from_file
+record = wi.load_record(sys.argv[2])
+n = {"compiles": 0, "hits": 0}
+def on_duration(event, duration, **kwargs):
+    n["compiles"] += event == "/jax/core/compile/backend_compile_duration"
+def on_event(event, **kwargs):
+    n["hits"] += event == "/jax/compilation_cache/cache_hits"
+jax.monitoring.register_event_duration_secs_listener(on_duration)
+jax.monitoring.register_event_listener(on_event)
+cal = wi.calibrate(record, observations_from_file(sys.argv[1], record))
+print(cal.params["f1_hz"]["value"], n["compiles"] - n["hits"], n["hits"])
+"""
+
+
+@pytest.mark.slow
+def test_the_library_in_a_fresh_interpreter_compiles_nothing_the_cache_holds(tmp_path):
+    """``wi.calibrate`` and ``observations_from_file`` from a user's script: the second fresh
+    interpreter takes every program, the small eager ones included, from whiskerid's cache
+    (before, 26 of them were compiled afresh in every process)."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    import whiskerid as wi
+
+    sim = wi.simulate(wi.paper_record(), excitation="decay", observable="adc", rate_hz=200.0,
+                      duration_s=3.0, noise_db=30.0, seed=1, tip_deflection_m=2e-3)  # fmt: skip
+    wi.write_csv(tmp_path / "pluck.csv", sim)
+    record = Path(__file__).resolve().parents[1] / "fits" / "paper-whisker.toml"
+    env = {**os.environ, "WHISKERID_COMPILE_CACHE": str(tmp_path / "cache")}
+    env.pop("JAX_COMPILATION_CACHE_DIR", None)
+    argv = [sys.executable, "-c", _LIBRARY, str(tmp_path / "pluck.csv"), str(record)]
+    out = [subprocess.run(argv, env=env, capture_output=True, text=True, timeout=600)
+           for _ in range(2)]  # fmt: skip
+    assert [o.returncode for o in out] == [0, 0], out[-1].stderr[-2000:]
+    first, second = (o.stdout.split() for o in out)
+    assert first[0] == second[0]  # the same fit
+    assert int(second[1]) == 0 and int(second[2]) > 10, second  # all from the cache

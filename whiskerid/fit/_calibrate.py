@@ -47,6 +47,7 @@ from .._choices import PINS, SOLVERS
 from .._version import __version__
 from ..io import sha256_of
 from ..model import UniformBeam, WhiskerRecord
+from ._aot import with_compile_cache
 from ._checks import (
     LAG1_MAX,
     check_fit,
@@ -145,6 +146,7 @@ class Calibration:
 # --------------------------------------------------------------------------- calibrate
 
 
+@with_compile_cache  # its small eager programs too, not only the calibration's own
 @single_blas_thread(jax_lapack=True)  # small solves: threads only wait on a busy machine
 def calibrate(
     record: WhiskerRecord,
@@ -242,8 +244,9 @@ def calibrate(
     pin = "geometry" if pin == "auto" else pin
     nominal = record.whisker().with_modes(n_modes)
     problem = FitProblem.from_observations(
-        record, obs, static=static, n_modes=n_modes, zeta_per_mode=zeta_per_mode, pin=pin
-    )
+        record, obs, static=static, n_modes=n_modes, zeta_per_mode=zeta_per_mode, pin=pin,
+        nominal=nominal,
+    )  # fmt: skip
     # One compiled program (module _core): the start grid over (κ, ζ) with the linear
     # coefficients solved exactly, the solve, each block (recording, static test) weighted by
     # its own residual scale (s² ≈ 1, a reduced χ²), and one Jacobian at the optimum for the

@@ -331,9 +331,12 @@ def observations_from_file(
         RecordingError: A file that cannot be read, or sampled at odds with the whisker.
         CalibrationError: As :func:`observations_from_recording`.
     """
+    from ._aot import compile_cache  # (JAX: the record's f_1 is computed eagerly)
+
     rec = read_recording(path, time_col=time_col)
-    check_sampling(rec, record)
-    return observations_from_recording(rec, record, **options)
+    with compile_cache():  # its small programs from the cache, as the command line's
+        check_sampling(rec, record)
+        return observations_from_recording(rec, record, **options)
 
 
 def _cut(obs: Observation, t_start, t_end, path) -> Observation:

@@ -149,11 +149,14 @@ class FitProblem(eqx.Module):
         n_modes: int = 2,
         zeta_per_mode: bool = False,
         pin: str = "geometry",
+        nominal: Whisker | None = None,
     ) -> "FitProblem":
-        """The problem of fitting ``record``'s whisker to recordings (and a static test)."""
+        """The problem of fitting ``record``'s whisker to recordings (and a static test);
+        ``nominal`` is ``record.whisker().with_modes(n_modes)`` if the caller has it."""
         if pin not in PINS or pin == "auto":
             raise CalibrationError(f"pin must be geometry or material, not {pin!r}")
-        nominal = record.whisker().with_modes(n_modes)
+        if nominal is None:
+            nominal = record.whisker().with_modes(n_modes)
         length = record.structure.length_m
         rho_a = float(nominal.rho_a)
         recs = [_recording_model(record, o, n_modes) for o in observations]

@@ -6,7 +6,6 @@ that one compiled program serves every recording) and searched inside the calibr
 compiled program (:func:`start_from_grid`, traceable); :func:`start_values` runs both.
 """
 
-import itertools
 import math
 
 import equinox as eqx
@@ -37,10 +36,15 @@ def spectral_peaks(
     in the record, which a Hann window (near zero at the ends) all but erases.
     """
     _, yu, rate = resample_uniform(t, y)
-    freqs, amps = amplitude_spectrum(yu, rate, window=window)
+    return spectral_peaks_uniform(yu, rate, window, n), rate
+
+
+def spectral_peaks_uniform(y: np.ndarray, rate_hz: float, window: str = "hann", n: int = 3):
+    """:func:`spectral_peaks` of uniformly sampled ``y`` (frequencies only)."""
+    freqs, amps = amplitude_spectrum(y, rate_hz, window=window)
     df = freqs[1] - freqs[0] if freqs.size > 1 else 1.0
     peaks = find_peaks(freqs, amps, n=n, min_separation_hz=3 * df)
-    return [p.frequency_hz for p in peaks if p.frequency_hz > 0], rate
+    return [p.frequency_hz for p in peaks if p.frequency_hz > 0]
 
 
 def envelope_zeta(t: np.ndarray, y: np.ndarray, f_obs_hz: float, f_true_hz: float) -> float | None:
@@ -57,9 +61,11 @@ def envelope_zeta(t: np.ndarray, y: np.ndarray, f_obs_hz: float, f_true_hz: floa
         return None
     edges = t[0] + win * np.arange(n_win + 1)
     idx = np.searchsorted(t, edges)
-    rms = np.array(
-        [np.sqrt(np.mean(y[a:b] ** 2)) if b > a else np.nan for a, b in itertools.pairwise(idx)]
-    )
+    # each window's mean square from cumulative sums (a loop over windows took milliseconds)
+    sums = np.concatenate([[0.0], np.cumsum(y**2)])
+    count = np.diff(idx)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rms = np.where(count > 0, np.sqrt(np.maximum(np.diff(sums[idx]), 0.0) / count), np.nan)
     mid = 0.5 * (edges[:-1] + edges[1:])
     floor = np.nanmin(rms)
     keep = np.isfinite(rms) & (rms > 4 * floor)
@@ -82,6 +88,12 @@ _MAX_PROFILE_SAMPLES = 6000
 F_POINTS = 48
 #: Candidate ζ in the second stage of the search: the record's ×¼…×4 and the envelopes'.
 Z_POINTS = 12
+#: The same when every recording is a free decay (the spectrum's candidates only).
+F_DECAY = 8
+#: Second-stage ζ of a free-decay grid: the record's, and the envelopes' ×½, ×1, ×2.
+Z_DECAY = 4
+#: f_1 candidates of a free-decay grid whose ζ is searched in the second stage.
+REFINED_DECAY = 2
 #: f_1 candidates (the best of the first stage) whose ζ is searched in the second.
 _REFINED = 4
 #: Grid points profiled at once (vectorised) inside the sequential map over the grid.
@@ -114,14 +126,21 @@ def start_grid(
 ) -> dict[str, np.ndarray]:
     """The start grid over ``(κ, ζ)``, seeded by the data, as arrays of fixed sizes.
 
-    f_1 is searched within a factor 2.5 of the nominal (``f1_hz``, else the record's): 17
-    geometric steps (12 % apart) plus the spectral peaks of every free decay, each as the
-    line itself and with its aliases unfolded (:func:`unalias`); ζ among the record's (×¼…×4)
-    and the envelopes' decay rates (see :func:`start_from_grid` for the two stages).
+    f_1 is searched within a factor 2.5 of the nominal (``f1_hz``, else the record's) among
+    the spectral peaks of every free decay, each as the line itself and with its aliases
+    unfolded (:func:`unalias`), and, where no recording is a free decay (a sine, base
+    motion), 17 geometric steps 12 % apart; ζ among the record's (×¼…×4) and the envelopes'
+    decay rates (see :func:`start_from_grid` for the two stages). When every recording is a
+    free decay the spectrum says where f_1 is, and the grid is small (:data:`F_DECAY`
+    candidates, each with the ζ that the envelopes' decay rate σ = ζω gives at its
+    frequency, then the best
+    :data:`REFINED_DECAY` with :data:`Z_DECAY` ζ): 16 profiles instead of 144, which were
+    most of a warm calibration's time. Its free slots (fewer peaks than slots) hold steps
+    of 25 % about the nominal f_1.
 
     Returns:
         ``f_hz`` and ``log_kappa`` of each f_1 candidate and ``f_valid`` (0 for padding);
-        ``zeta1``, the two ζ of the first stage (the record's and the envelopes' median);
+        ``zeta1``, the first stage's ζ of each candidate (``(n_f, k)``);
         ``zeta`` and ``z_valid``, the second stage's;
         ``f_ref_hz`` (the centre of the search), ``nyquist_hz`` (of the fastest free-decay
         recording; infinite without one), ``prefer_baseband`` (1 unless ``f1_hz`` was given:
@@ -133,32 +152,28 @@ def start_grid(
     # At low sample rates a higher mode can alias onto the first (e.g. f_2 = 645 Hz folds to
     # 45 Hz at 200 Hz): each candidate is judged by the cost of the whole multi-mode model.
     lo, hi = f1_nom / 2.5, f1_nom * 2.5
-    f_cands = list(f1_nom * np.geomspace(1 / 2.5, 2.5, 17))
-    z_cands = [zeta_nom * k for k in (0.25, 0.5, 1.0, 2.0, 4.0)]
-    nyquist = np.inf
-    for o in observations:
-        if o.excitation != "decay":
-            continue
-        # Both windows: a pluck that dies out within the first few percent of the record is
-        # below the noise in the Hann-windowed spectrum (the start then rested on the grid
-        # alone and picked an aliased higher mode in 5 of 200 seeded trials).
-        yc = o.y - np.median(o.y)
-        peaks, rate = spectral_peaks(o.t, yc)
-        peaks = peaks + spectral_peaks(o.t, yc, window="none")[0]
-        nyquist = rate / 2 if not np.isfinite(nyquist) else max(nyquist, rate / 2)
-        for fp in peaks:
-            # the alias nearest the nominal, and the line itself (below the Nyquist frequency)
-            f_true = unalias(fp, rate, f1_nom)
-            f_cands.extend(f for f in {f_true, fp} if lo <= f <= hi)
-            z = envelope_zeta(o.t, o.y, fp, f_true) if lo <= f_true <= hi else None
-            if z is not None:
-                z_cands.append(z)
-    # The record's five ζ, then the envelopes' in order; as many f_1 as fit.
-    envelopes = z_cands[5:]
-    zeta1 = [zeta_nom, float(np.median(envelopes)) if envelopes else 2 * zeta_nom]
-    z_cands = np.clip(np.unique(np.round(z_cands[:Z_POINTS], 6)), 1e-4, 0.5)
-    f_cands = np.asarray(f_cands)[:F_POINTS]
-    pad_f, pad_z = F_POINTS - f_cands.size, Z_POINTS - z_cands.size
+    spectral, rates, nyquist = _spectral_candidates(observations, f1_nom, lo, hi)
+    envelopes = [r / (2 * np.pi * f) for f, r, true in spectral if true and r is not None]
+    zeta_env = float(np.median(envelopes)) if envelopes else 2 * zeta_nom
+    if all(r.excitation == "decay" for r in problem.recordings):
+        f_cands = _unique([f for f, _, _ in spectral])[:F_DECAY]
+        steps = [f1_nom * 1.25**k for k in (0, -1, 1, -2, 2, -3, 3, -4)]
+        f_cands += steps[: F_DECAY - len(f_cands)]
+        # each candidate's own ζ: the envelope's decay rate σ = ζ ω at that frequency
+        rate = float(np.median(rates)) if rates else None
+        zeta1 = [[rate / (2 * np.pi * f) if rate else zeta_nom] for f in f_cands]
+        z_cands = [zeta_nom, zeta_env, zeta_env / 2, zeta_env * 2]
+        nf, nz = F_DECAY, Z_DECAY
+    else:
+        f_cands = list(f1_nom * np.geomspace(1 / 2.5, 2.5, 17))
+        f_cands += [f for f, _, _ in spectral]
+        zeta1 = [[zeta_nom, zeta_env]] * min(len(f_cands), F_POINTS)
+        # The record's five ζ, then the envelopes' in order.
+        z_cands = [zeta_nom * k for k in (0.25, 0.5, 1.0, 2.0, 4.0)] + envelopes
+        nf, nz = F_POINTS, Z_POINTS
+    z_cands = np.clip(np.unique(np.round(z_cands[:nz], 6)), 1e-4, 0.5)
+    f_cands = np.asarray(f_cands)[:nf]
+    pad_f, pad_z = nf - f_cands.size, nz - z_cands.size
     log_ei, d0 = math.log(float(nominal.EI)), 0.0
     if problem.fit_ei:
         fit = np.asarray(problem.static_test.line_fit)
@@ -169,7 +184,7 @@ def start_grid(
         "log_kappa": np.pad(np.log(_kappa_from_f1(nominal, f_cands)), (0, pad_f), mode="edge"),
         "f_hz": np.pad(f_cands, (0, pad_f), mode="edge"),
         "f_valid": np.pad(np.ones(f_cands.size), (0, pad_f)),
-        "zeta1": np.clip(np.asarray(zeta1), 1e-4, 0.5),
+        "zeta1": np.pad(np.clip(np.asarray(zeta1), 1e-4, 0.5), ((0, pad_f), (0, 0)), mode="edge"),
         "zeta": np.pad(z_cands, (0, pad_z), mode="edge"),
         "z_valid": np.pad(np.ones(z_cands.size), (0, pad_z)),
         "f_ref_hz": np.asarray(f1_nom),
@@ -180,11 +195,58 @@ def start_grid(
     }
 
 
+def _spectral_candidates(observations, f1_nom, lo, hi):
+    """f_1 candidates from the free decays' spectral peaks, within ``[lo, hi]``.
+
+    Returns:
+        ``(f_hz, decay rate σ (1/s) or None, whether f is the unfolded alias)`` of each
+        candidate, in the order found (the largest peaks first); each recording's decay rate;
+        and the Nyquist frequency of the fastest free decay (infinite without one).
+    """
+    out, rates, nyquist = [], [], np.inf
+    for o in observations:
+        if o.excitation != "decay":
+            continue
+        # Both windows: a pluck that dies out within the first few percent of the record is
+        # below the noise in the Hann-windowed spectrum (the start then rested on the grid
+        # alone and picked an aliased higher mode in 5 of 200 seeded trials).
+        yc = o.y - np.median(o.y)
+        _, yu, rate = resample_uniform(o.t, yc)
+        peaks = spectral_peaks_uniform(yu, rate) + spectral_peaks_uniform(yu, rate, "none")
+        nyquist = rate / 2 if not np.isfinite(nyquist) else max(nyquist, rate / 2)
+        first = True  # the recording's decay rate: its largest peak's (the envelope is the
+        # whole signal's RMS, over windows of four periods: a weak low line's are too long)
+        for fp in _unique(peaks):
+            # the alias nearest the nominal, and the line itself (below the Nyquist frequency)
+            f_true = unalias(fp, rate, f1_nom)
+            sigma = None
+            if lo <= f_true <= hi:
+                z = envelope_zeta(o.t, o.y, fp, f_true)
+                sigma = None if z is None else z * 2 * np.pi * f_true
+                if sigma is not None and first:
+                    rates.append(sigma)
+                    first = False
+            out.extend(
+                (f, sigma, f == f_true) for f in dict.fromkeys((f_true, fp)) if lo <= f <= hi
+            )
+    return out, rates, nyquist
+
+
+def _unique(freqs, rel: float = 1e-3) -> list[float]:
+    """``freqs`` in order, without those within ``rel`` of an earlier one."""
+    out: list[float] = []
+    for f in freqs:
+        if all(abs(f - g) > rel * g for g in out):
+            out.append(float(f))
+    return out
+
+
 def start_from_grid(problem: FitProblem, grid: dict, masks=None) -> dict:
     """The start parameters from :func:`start_grid` (traceable): the grid point of least
     profile cost, with the linear coefficients solved exactly there.
 
-    Two stages: every f_1 candidate with the first stage's two ζ, then the four best f_1
+    Two stages: every f_1 candidate with its first-stage ζ (the record's and the envelopes';
+    a free-decay grid's own envelope ζ), then the best f_1 (four; a free-decay grid's two)
     with every ζ candidate (the profile cost of a decay depends on ζ far less than on f_1,
     so the full product is not needed). Among points within 2 % of the least cost (a line
     and its alias fit alike), the one nearest the centre of the search, preferring those
@@ -214,16 +276,18 @@ def start_from_grid(problem: FitProblem, grid: dict, masks=None) -> dict:
         return jnp.where((valid > 0) & jnp.isfinite(c), c, jnp.inf), zu
 
     nf, nz = grid["f_hz"].shape[0], grid["zeta"].shape[0]
-    # stage 1: every f_1 with two ζ
-    lk1 = jnp.repeat(grid["log_kappa"], 2)
-    f1 = jnp.repeat(grid["f_hz"], 2)
-    c1, zu1 = costs(lk1, jnp.tile(grid["zeta1"], nf), jnp.repeat(grid["f_valid"], 2))
+    k1 = grid["zeta1"].shape[1]
+    refined = REFINED_DECAY if nf <= F_DECAY else _REFINED
+    # stage 1: every f_1 with its first ζ
+    lk1 = jnp.repeat(grid["log_kappa"], k1)
+    f1 = jnp.repeat(grid["f_hz"], k1)
+    c1, zu1 = costs(lk1, grid["zeta1"].reshape(-1), jnp.repeat(grid["f_valid"], k1))
     # stage 2: the best f_1 with every ζ
-    top = jnp.argsort(jnp.min(c1.reshape(nf, 2), axis=1))[:_REFINED]
+    top = jnp.argsort(jnp.min(c1.reshape(nf, k1), axis=1))[:refined]
     lk2 = jnp.repeat(grid["log_kappa"][top], nz)
     f2 = jnp.repeat(grid["f_hz"][top], nz)
-    valid2 = jnp.repeat(grid["f_valid"][top], nz) * jnp.tile(grid["z_valid"], _REFINED)
-    c2, zu2 = costs(lk2, jnp.tile(grid["zeta"], _REFINED), valid2)
+    valid2 = jnp.repeat(grid["f_valid"][top], nz) * jnp.tile(grid["z_valid"], refined)
+    c2, zu2 = costs(lk2, jnp.tile(grid["zeta"], refined), valid2)
     cost, f_hz = jnp.concatenate([c1, c2]), jnp.concatenate([f1, f2])
     log_kappa, zeta_u = jnp.concatenate([lk1, lk2]), jnp.concatenate([zu1, zu2])
     near = cost <= jnp.min(cost) * _NEAR + 1e-300

@@ -13,6 +13,9 @@ restores the user's setting after.
 
 import contextlib
 import functools
+import sys
+
+_CONTROLLER: dict = {}
 
 
 @contextlib.contextmanager
@@ -26,14 +29,19 @@ def one_blas_thread(*, jax_lapack: bool = False):
             of CPU with it on two threads on a busy machine, 0.045 s on one.
     """
     try:
-        from threadpoolctl import threadpool_limits
+        from threadpoolctl import ThreadpoolController
     except ImportError:  # pragma: no cover - a dependency; the limit is only for speed
         yield
         return
     if jax_lapack:
         with contextlib.suppress(ImportError):
             import scipy.linalg.cython_lapack  # noqa: F401  (what jaxlib loads its LAPACK from)
-    with threadpool_limits(1, user_api="blas"):
+    # Finding the loaded libraries takes milliseconds (a tenth of a warm calibration): the
+    # controller is kept while no module has been imported since (a new BLAS comes with one).
+    key = len(sys.modules)
+    if _CONTROLLER.get("key") != key:
+        _CONTROLLER.update(key=key, controller=ThreadpoolController())
+    with _CONTROLLER["controller"].limit(limits=1, user_api="blas"):
         yield
 
 

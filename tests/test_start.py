@@ -1,0 +1,99 @@
+"""The calibration's start from the spectrum: candidates near the truth, a small grid for free
+decays, and a chosen start near the truth at every sampling rate.
+
+The plucks are written here in NumPy (two damped modes, f_2/f_1 the cantilever's 6.267,
+white noise), not by the package's simulator; the record the start is centred on is 30 %
+high in f_1, as a user's nominal record may well be.
+"""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from whiskerid.fit import FitProblem, Observation
+from whiskerid.fit._start import F_DECAY, F_POINTS, start_grid, start_values
+from whiskerid.model import paper_record
+
+RATIO = 6.267  # f_2/f_1 of a cantilever without tip mass (4.6941²/1.8751²)
+
+# (sampling rate Hz, f_1 Hz, ζ): slow, fast and strongly damped; mode 2 aliased at 200 Hz
+PLUCKS = [
+    (200.0, 46.0, 0.04),
+    (200.0, 71.0, 0.01),
+    (475.0, 92.0, 0.12),
+    (860.0, 30.0, 0.005),
+    (860.0, 110.0, 0.03),
+]
+
+
+def _record(f1_hz):
+    """The paper whisker's record with its f_1 moved to ``f1_hz`` (through its modulus)."""
+    rec = paper_record()
+    f0 = float(rec.whisker().natural_frequencies_hz[0])
+    s = rec.structure
+    return rec.replace(
+        structure=replace(s, shear_modulus_pa=s.shear_modulus_pa * (f1_hz / f0) ** 2)
+    )
+
+
+def _pluck(rate_hz, f1_hz, zeta, seed=0):
+    """A two-mode free decay sampled at ``rate_hz`` until it is ~1 % of its start, 30 dB SNR."""
+    rng = np.random.default_rng(seed)
+    duration = float(np.clip(4.6 / (2 * np.pi * f1_hz * zeta), 1.0, 6.0))
+    t = np.arange(int(duration * rate_hz)) / rate_hz
+    y = np.zeros_like(t)
+    for f, a in ((f1_hz, 1.0), (RATIO * f1_hz, 0.15)):
+        w = 2 * np.pi * f
+        wd = w * np.sqrt(1 - zeta**2)
+        y += a * np.exp(-zeta * w * t) * np.cos(wd * t + rng.uniform(0, 2 * np.pi))
+    y = 1000.0 * y + 200.0
+    y += rng.normal(0.0, np.std(y) / 10 ** (30 / 20), t.size)
+    return Observation(t, y, excitation="decay", observable="deflection")
+
+
+def _problem(obs, nominal):
+    problem = FitProblem.from_observations(nominal, [obs], n_modes=2, pin="geometry")
+    return problem, nominal.whisker().with_modes(2)
+
+
+@pytest.mark.parametrize(("rate", "f1", "zeta"), PLUCKS)
+def test_the_spectrum_puts_a_candidate_on_f1_with_its_own_zeta(rate, f1, zeta):
+    obs = _pluck(rate, f1, zeta)
+    nominal = _record(1.3 * f1)
+    problem, whisker = _problem(obs, nominal)
+    grid = start_grid(problem, [obs], whisker)
+    # a free decay's grid is the small one: the spectrum's candidates, 16 profiles
+    assert grid["f_hz"].shape == (F_DECAY,) and grid["zeta1"].shape == (F_DECAY, 1)
+    err = np.abs(grid["f_hz"] / f1 - 1)
+    best = int(np.argmin(np.where(grid["f_valid"] > 0, err, np.inf)))
+    # within a few tenths of a bin (1/duration: 1 % at 92 Hz over 1.1 s) or a tenth of the
+    # resonance's half-power width (2ζ f_1: a strongly damped peak is broad and skewed)
+    bin_rel = 1.0 / (obs.t[-1] * f1)
+    assert err[best] < max(0.3 * bin_rel, 0.1 * zeta, 2e-3), (grid["f_hz"], f1)
+    # its first ζ from the envelope's decay rate, within 35 % of the truth
+    assert abs(grid["zeta1"][best, 0] / zeta - 1) < 0.35, (grid["zeta1"][best], zeta)
+
+
+def test_a_sine_keeps_the_full_grid():
+    """Without a free decay the spectrum does not say where f_1 is: 17 steps and more."""
+    t = np.arange(600) / 200.0
+    y = 100 * np.sin(2 * np.pi * 40.0 * t) + np.random.default_rng(1).normal(0, 1, t.size)
+    obs = Observation(t, y, excitation="sine", fb_hz=40.0, observable="deflection")
+    nominal = paper_record()
+    problem, whisker = _problem(obs, nominal)
+    grid = start_grid(problem, [obs], whisker)
+    assert grid["f_hz"].shape == (F_POINTS,) and int(grid["f_valid"].sum()) >= 17
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("rate", "f1", "zeta"), PLUCKS)
+def test_the_chosen_start_is_near_the_truth(rate, f1, zeta):
+    """The compiled search picks the line, not the record's f_1 nor an alias of mode 2."""
+    obs = _pluck(rate, f1, zeta, seed=1)
+    nominal = _record(1.3 * f1)
+    problem, whisker = _problem(obs, nominal)
+    theta = start_values(problem, [obs], whisker)
+    w = problem.whisker(theta)
+    assert abs(float(w.natural_frequencies_hz[0]) / f1 - 1) < 5e-3
+    assert 0.5 < float(np.asarray(w.zeta)[0]) / zeta < 2.0
