@@ -67,6 +67,17 @@ def add_calibrate(sub, command_error) -> None:
         "zeta(a)) or auto (nonlinear when the test rejects the linear fit)",
     )
     p.add_argument(
+        "--free-modes",
+        action="store_true",
+        help="with --model nonlinear (or auto): modes 2 and up get their own frequency and "
+        "damping, started at the data's line near the beam's f_k, instead of the beam's ratio "
+        "to f1. Use it when the beam model puts a higher mode in the wrong place: a "
+        "linear or nonlinear fit then leaves a line in the residual spectrum near f2 "
+        "('residual_spectrum' in --json). Reports f2_hz, zeta_2 (...) and stores them in "
+        "the record, which simulate plays; posterior does not sample such a record. "
+        "Free decays only, --modes 2 or more",
+    )
+    p.add_argument(
         "--plot",
         type=Path,
         help="save data, fit and residuals as this PNG (with added masses: the decays without "
@@ -195,6 +206,8 @@ def _cmd_calibrate(args, command_error, parser) -> dict:
             f"--modulus-tolerance {args.modulus_tolerance!r} must be a relative 1-sigma in "
             "[0, 1), e.g. 0.05 for 5 %"
         )
+    if args.free_modes:
+        _check_free_modes(args, command_error)
     record = load_record(args.whisker)
     columns = _plane_columns(args.signal_col, command_error)
     if columns is not None:
@@ -219,6 +232,7 @@ def _cmd_calibrate(args, command_error, parser) -> dict:
         added_mass=masses,
         modulus_tolerance=args.modulus_tolerance,
         model=args.model,
+        free_modes=args.free_modes,
     )
     progress_step("writing")
     _with_options(cal.record, args, parser).save(args.out)
@@ -237,6 +251,27 @@ def _cmd_calibrate(args, command_error, parser) -> dict:
             file=sys.stderr,
         )
     return out
+
+
+def _check_free_modes(args, command_error) -> None:
+    """Refuse ``--free-modes`` where the fit has no nonlinear higher mode to free."""
+    if args.model == "linear":
+        raise command_error(
+            "--free-modes frees the nonlinear fit's higher modes: add --model nonlinear "
+            "(or auto), or leave --free-modes out"
+        )
+    if args.modes < 2:
+        raise command_error(
+            f"--free-modes frees modes 2 and up, but --modes is {args.modes}: "
+            "give --modes 2 or more"
+        )
+    if args.static or args.base_col or args.added_mass or args.excitation not in ("auto", "decay"):
+        raise command_error(
+            "--free-modes fits free decays only (no --static, --base-col, --added-mass or "
+            "sine/base excitation): leave it out for these recordings"
+        )
+    if args.signal_col and "," in args.signal_col:
+        raise command_error("--free-modes fits one plane: give one --signal-col")
 
 
 def _check_added_mass(args, command_error) -> None:

@@ -285,12 +285,14 @@ def _mm(a_m: float) -> str:
 MODELS = ("linear", "nonlinear", "auto")
 
 
-def finish(cal, observations, model: str, terms=None, *, resid=None, jac=None, core=None):
+def finish(cal, observations, model: str, terms=None, *, resid=None, jac=None, core=None,
+           free_modes: bool = False):  # fmt: skip
     """The calibration ``model`` asks for, from the linear one ``cal``.
 
     ``linear``: ``cal``, marked ``check`` (``amplitude-dependent``) when the score tests
     reject it; ``nonlinear``: the nonlinear fit started at ``cal``; ``auto``: the nonlinear
-    fit when the tests reject the linear one, else ``cal``. The test's figures are in
+    fit when the tests reject the linear one, else ``cal``; ``free_modes``: as
+    :func:`whiskerid.fit.calibrate_nonlinear`. The test's figures are in
     ``diagnostics["amplitude_test"]`` of the linear fit.
     """
     from ._nonlinear import NL_TERMS, calibrate_nonlinear
@@ -315,7 +317,7 @@ def finish(cal, observations, model: str, terms=None, *, resid=None, jac=None, c
     check_noise_floor(cal, observations, _LINEAR_ADVICE)
     if model == "linear" or (model == "auto" and not (test and test["rejects"])):
         return cal
-    nl = calibrate_nonlinear(cal, observations, terms=terms or NL_TERMS)
+    nl = calibrate_nonlinear(cal, observations, terms=terms or NL_TERMS, free_modes=free_modes)
     check_noise_floor(nl, observations, _NONLINEAR_ADVICE)
     return nl
 

@@ -164,6 +164,7 @@ def calibrate(
     modulus_tolerance: float = MODULUS_TOLERANCE,
     model: str = "linear",
     nl_terms: tuple[str, ...] | None = None,
+    free_modes: bool = False,
 ) -> Calibration:
     """Fit κ (f_1), ζ and the nuisances to one or more recordings (and a static test).
 
@@ -197,6 +198,11 @@ def calibrate(
             test rejects the linear fit). See :mod:`whiskerid.fit._amplitude`.
         nl_terms: The nonlinear model's terms (default all: ``cubic``, ``quadratic``,
             ``coulomb``).
+        free_modes: The nonlinear model's modes 2… with their own frequency and damping,
+            started at the data's line near the beam's ``f_k`` (reported as ``f2_hz``,
+            ``zeta_2``, …): for a higher mode the beam puts in the wrong place, seen as a
+            residual line near it. Needs ``model`` nonlinear or auto, ``n_modes ≥ 2`` and
+            free decays (:func:`whiskerid.fit.calibrate_nonlinear`).
 
     Returns:
         A :class:`Calibration`; never raises on a failed solve (see ``status``).
@@ -212,6 +218,8 @@ def calibrate(
             "the nonlinear model fits free decays only (no sine, base motion or static test); "
             "fit those with --model linear"
         )
+    if free_modes:
+        _check_free_modes(model, n_modes, static, obs)
     if added_mass is not None and model != "linear":
         raise CalibrationError(
             "the added-mass method fits the linear model; leave out --model (or give linear)"
@@ -310,7 +318,26 @@ def calibrate(
     out.record = _updated_record(record, out, pin, static, obs, problem)
     from ._amplitude import finish  # amplitude dependence and the choice of model
 
-    return finish(out, obs, model, nl_terms, resid=resid_w, jac=jac, core=res.amplitude)
+    return finish(out, obs, model, nl_terms, resid=resid_w, jac=jac, core=res.amplitude,
+                  free_modes=free_modes)  # fmt: skip
+
+
+def _check_free_modes(model: str, n_modes: int, static, obs) -> None:
+    """Refuse ``free_modes`` where there is no nonlinear fit's higher mode to free."""
+    if model == "linear":
+        raise CalibrationError(
+            "free modes belong to the nonlinear fit: give --model nonlinear (or auto) with "
+            "--free-modes, or leave --free-modes out"
+        )
+    if n_modes < 2:
+        raise CalibrationError(
+            f"--free-modes frees modes 2 and up, but --modes is {n_modes}: give --modes 2 or more"
+        )
+    if static is not None or any(o.excitation != "decay" for o in obs):
+        raise CalibrationError(
+            "--free-modes fits free decays only (no sine, base motion or static test); "
+            "leave it out for these recordings"
+        )
 
 
 def fit_status(status: str, ok: bool, warnings: list[str], checks: dict[str, str]):

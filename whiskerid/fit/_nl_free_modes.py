@@ -131,3 +131,17 @@ def free_higher_modes(problem: NonlinearProblem, theta0: dict, obs) -> tuple:
         if best is None or cost < best[0]:
             best = (cost, fp, start)
     return best[1], best[2]
+
+
+def free_modes_table(params: dict, n_modes: int) -> dict:
+    """The record's ``[fit.nonlinear.free_modes]`` table from a fit's reported ``params``:
+    modes 2…'s fitted ``f_hz``, ``zeta`` and their 1σ (lists, mode 2 first), which
+    ``simulate`` plays instead of the beam's (:func:`whiskerid.model.nonlinear_coefficients`).
+    """
+    ks = range(2, n_modes + 1)
+    return {
+        "f_hz": [float(params[f"f{k}_hz"]["value"]) for k in ks],
+        "f_std_hz": [float(params[f"f{k}_hz"]["std"]) for k in ks],
+        "zeta": [float(params[f"zeta_{k}"]["value"]) for k in ks],
+        "zeta_std": [float(params[f"zeta_{k}"]["std"]) for k in ks],
+    }

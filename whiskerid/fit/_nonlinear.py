@@ -577,5 +577,9 @@ def _updated_record(cal: NonlinearCalibration):
         "amplitude": "mode 1 tip deflection (m)",
         "backbone": {k: v for k, v in cal.backbone.items() if k != "windows"},
     }
+    if hasattr(cal.problem, "higher"):  # free higher modes (._nl_free_modes)
+        from ._nl_free_modes import free_modes_table
+
+        fit["nonlinear"]["free_modes"] = free_modes_table(p, cal.problem.base.n_modes)
     extra["fit"] = fit
     return rec.replace(zeta=p["zeta"]["value"], extra=extra)

@@ -228,11 +228,21 @@ def nonlinear_response(
 def nonlinear_coefficients(record) -> dict | None:
     """The nonlinear coefficients a calibration stored in ``record`` (``[fit.nonlinear]``:
     ``gamma_per_m2``, ``quadratic_per_m``, ``coulomb_m_s2``, ``kappa_per_m`` for mode 1's tip
-    amplitude; a term not stored is 0), or None for a linear record."""
+    amplitude; a term not stored is 0; ``f0_hz``, mode 1's a → 0 frequency, where stored),
+    or None for a linear record. A fit with free higher
+    modes (``calibrate --free-modes``) adds ``free_f_hz`` and ``free_zeta``: modes 2…'s
+    fitted frequencies (Hz) and damping ratios, from ``[fit.nonlinear.free_modes]``."""
     nl = (record.extra.get("fit") or {}).get("nonlinear")
     if not nl:
         return None
-    return {k: float(nl.get(k, 0.0)) for k in COEFFICIENTS}
+    out = {k: float(nl.get(k, 0.0)) for k in COEFFICIENTS}
+    if "f0_hz" in nl:  # the a → 0 frequency (the record's κ is the linear fit's)
+        out["f0_hz"] = float(nl["f0_hz"])
+    free = nl.get("free_modes")
+    if free:
+        out["free_f_hz"] = tuple(float(f) for f in free["f_hz"])
+        out["free_zeta"] = tuple(float(z) for z in free["zeta"])
+    return out
 
 
 def nonlinear_pluck_state(whisker, t: Float[Array, " n"], q0, coefficients: dict):
@@ -242,21 +252,22 @@ def nonlinear_pluck_state(whisker, t: Float[Array, " n"], q0, coefficients: dict
     coordinate they become ``γφ₁(l)²``, ``κ|φ₁(l)|``, ``c|φ₁(l)|`` and ``F/|φ₁(l)|``.
 
     Args:
-        whisker: The whisker (mode 1's ``f₀`` and ``ζ₀`` are its first mode's).
+        whisker: The whisker (mode 1's ``ζ₀`` is its first mode's, and so is ``f₀`` unless
+            the coefficients hold the fit's ``f0_hz``).
         t: Increasing times from the release (s).
         q0: Modal displacements at the release (:func:`whiskerid.model.pluck`).
-        coefficients: As :func:`nonlinear_coefficients`.
+        coefficients: As :func:`nonlinear_coefficients` (with ``free_f_hz``, ``free_zeta``:
+            modes 2… ring at these, not at the beam's frequencies and ζ).
 
     Returns:
         A :class:`whiskerid.model.ModalState`.
     """
     from ._modes import mode_shape
-    from ._response import free_decay
 
-    lin = free_decay(whisker, t, q0=q0)
+    lin = _linear_modes(whisker, t, q0, coefficients)
     phi = jnp.abs(mode_shape(whisker.beta, 1.0)[0])
     mode = NonlinearMode(
-        f0_hz=whisker.natural_frequencies_hz[0],
+        f0_hz=coefficients.get("f0_hz", whisker.natural_frequencies_hz[0]),
         zeta0=whisker.zeta[0],
         gamma_per_m2=coefficients["gamma_per_m2"] * phi**2,
         quadratic_per_m=coefficients["quadratic_per_m"] * phi,
@@ -274,3 +285,20 @@ def nonlinear_pluck_state(whisker, t: Float[Array, " n"], q0, coefficients: dict
     return lin._replace(
         q=lin.q.at[:, 0].set(u), qd=lin.qd.at[:, 0].set(v), qdd=lin.qdd.at[:, 0].set(acc)
     )
+
+
+def _linear_modes(whisker, t, q0, coefficients: dict):
+    """The pluck's linear modal state, modes 2… at the fit's free ``f_k``, ``ζ_k`` when the
+    coefficients hold them (mode 1 is overwritten by the caller)."""
+    from ._response import ModalParams, ModalState, _free, modal_params
+
+    omega, zeta, gamma = modal_params(whisker)
+    zeta = jnp.broadcast_to(jnp.asarray(zeta, dtype=float), omega.shape)
+    f_free = jnp.asarray(coefficients.get("free_f_hz", ()), dtype=float)
+    k = min(int(f_free.size), int(omega.size) - 1)  # the whisker may have fewer modes
+    if k:
+        omega = omega.at[1 : 1 + k].set(2 * jnp.pi * f_free[:k])
+        zeta = zeta.at[1 : 1 + k].set(jnp.asarray(coefficients["free_zeta"], dtype=float)[:k])
+    q, qd, qdd = _free(ModalParams(omega, zeta, gamma), t, q0, jnp.zeros_like(q0))
+    zeros = jnp.zeros(jnp.shape(t))
+    return ModalState(q, qd, qdd, zeros, zeros, zeros)

@@ -159,6 +159,12 @@ def setup_nonlinear(record, obs, *, n_modes, pin, likelihood, nu, marginalize, u
     Args: as :func:`whiskerid.posterior.setup_posterior` (``user_prior``: the parsed
     ``[prior]`` table); ``nl_terms``: the terms to sample (the record's by default).
     """
+    if ((record.extra.get("fit") or {}).get("nonlinear") or {}).get("free_modes"):
+        raise PosteriorError(
+            "this record's nonlinear fit has free higher modes (calibrate --free-modes), which "
+            "posterior does not sample: use the calibration's 1-sigma, or calibrate without "
+            "--free-modes to sample f1, zeta and the nonlinear terms"
+        )
     if marginalize:
         raise PosteriorError(
             "the nonlinear model's design depends on its amplitudes (its linear coefficients), "
