@@ -26,6 +26,9 @@ with f1 3 % lower (``--drop``) from drive ``--first`` on; every drive is a sessi
 health log and :func:`whiskerid.fleet.check_fleet` reads them: the detection rate, the drives
 it took, and the false alarms per healthy whisker-session.
 
+``--save-blocks FILE`` appends each drive with its blocks' values (JSON lines): how the blocks
+are combined can then be studied without fitting again.
+
 Run: ``python benchmarks/fleet_driving.py [--drives 10 --independent 10 --detect 10]``; the
 detection fleet can be split over processes (``--whiskers 0 1 2 --save-rows a.json`` in each,
 then ``--load-rows a.json b.json``).
@@ -143,6 +146,13 @@ def _summary(entries):
     }  # fmt: skip
 
 
+def _print(entry, fit, args):
+    print(json.dumps(entry), flush=True)
+    if args.save_blocks:  # each drive's blocks, to study how they are combined
+        with open(args.save_blocks, "a") as fh:
+            fh.write(json.dumps({**entry, "blocks": fit.blocks}) + "\n")
+
+
 def accuracy(args, f1_start, zeta_start):
     from whiskerid.fleet import identify_driving
 
@@ -154,7 +164,7 @@ def accuracy(args, f1_start, zeta_start):
         t0 = time.perf_counter()
         fit = identify_driving(signals, RATE, f1_start, zeta_start)
         out.append(_entry("terrain", k + 1, f1, zeta, fit, time.perf_counter() - t0))
-        print(json.dumps(out[-1]), flush=True)
+        _print(out[-1], fit, args)
     for k in range(args.independent):
         rng = np.random.default_rng(5000 + k)
         f1, zeta = rng.uniform(30, 70), rng.uniform(0.02, 0.07)
@@ -162,7 +172,7 @@ def accuracy(args, f1_start, zeta_start):
         t0 = time.perf_counter()
         fit = identify_driving(signals, RATE, f1 * rng.uniform(0.96, 1.04), 0.04)
         out.append(_entry("independent", 5000 + k, f1, zeta, fit, time.perf_counter() - t0))
-        print(json.dumps(out[-1]), flush=True)
+        _print(out[-1], fit, args)
     kinds = [k for k in ("terrain", "independent") if any(d["kind"] == k for d in out)]
     return {kind: _summary([d for d in out if d["kind"] == kind]) for kind in kinds}
 
@@ -233,6 +243,7 @@ def main() -> None:
     ap.add_argument("--first", type=int, default=3, help="first drive with the drop (0-based)")
     ap.add_argument("--drop", type=float, default=0.03, help="relative f1 drop (detection)")
     ap.add_argument("--whiskers", type=int, nargs="*", help="only these whiskers (detection)")
+    ap.add_argument("--save-blocks", help="append each drive with its blocks (JSON lines)")
     ap.add_argument("--save-rows", help="write the detection fleet's health rows (JSON)")
     ap.add_argument("--load-rows", nargs="*", default=[], help="rows of earlier runs (JSON)")
     args = ap.parse_args()
