@@ -177,6 +177,13 @@ def accuracy(args, f1_start, zeta_start):
     return {kind: _summary([d for d in out if d["kind"] == kind]) for kind in kinds}
 
 
+def _upper95(k: int, n: int) -> float:
+    """One-sided 95 % upper bound (Clopper–Pearson) on a rate seen k times in n."""
+    from scipy.stats import beta
+
+    return float(beta.ppf(0.95, k + 1, n - k)) if n > k else 1.0
+
+
 def detection(args, f1_start, zeta_start):
     """Health logs of ``--detect`` whiskers checked by :func:`whiskerid.fleet.check_fleet`."""
     from whiskerid.fleet import check_fleet, health_row, identify_driving
@@ -206,16 +213,18 @@ def detection(args, f1_start, zeta_start):
     result = check_fleet(rows)
     events = {e["whisker"]: e for e in result.events if e["parameter"] == "f1_hz"}
     flagged = {(f["whisker"], f["session"]) for f in result.flags}  # either parameter
-    flagged_f1 = {(f["whisker"], f["session"]) for f in result.flags if f["parameter"] == "f1_hz"}
     checked = {(c["whisker"], c["session"]) for c in result.changes if c["parameter"] == "f1_hz"}
     healthy = {(w, s) for w, s in checked
                if w.split()[0] not in damaged or int(s[-2:]) < damaged[w.split()[0]]}  # fmt: skip
-    delays = []
+    delays = []  # drives after the damage (incl.) until the one that *found* the change
     for w, first in damaged.items():
-        hits = sorted(
-            int(s[-2:]) for ww, s in flagged_f1 if ww.split()[0] == w and int(s[-2:]) >= first
-        )
-        delays.append(hits[0] - first + 1 if hits else None)  # drives after the damage, incl.
+        found_at = [int(e["detected"][-2:]) for ww, e in events.items() if ww.split()[0] == w]
+        delays.append(found_at[0] - first + 1 if found_at and found_at[0] >= first else None)
+    located = sum(
+        int(e["began"][-2:]) == damaged[w.split()[0]]
+        for w, e in events.items()
+        if w.split()[0] in damaged
+    )
     found = [d for d in delays if d is not None]
     return {
         "whiskers": args.detect, "damaged": len(damaged), "sessions": args.sessions,
@@ -226,7 +235,9 @@ def detection(args, f1_start, zeta_start):
         "healthy_sessions_checked": len(healthy),
         "false_alarms": len(flagged & healthy),
         "false_alarm_rate": len(flagged & healthy) / max(len(healthy), 1),
-        "f1_events": {w: {k: e.get(k) for k in ("began", "size_pct", "kind")}
+        "false_alarm_rate_95pct_upper": _upper95(len(flagged & healthy), len(healthy)),
+        "located_where_it_began": located,
+        "f1_events": {w: {k: e.get(k) for k in ("began", "detected", "size_pct", "rule")}
                       for w, e in events.items()},
     }  # fmt: skip
 
