@@ -216,7 +216,7 @@ def test_a_drives_1sigma_from_its_blocks_is_honest_for_normal_blocks(n):
 def test_the_pulls_over_short_road_drives_scatter_by_about_one():
     """Drives of the two-axle robot on a triangular patch (written here, not with the
     project's simulator): the errors over the 1σ have a root mean square not far above 1
-    (the previous MAD rule's 1σ was 1.3–1.7 times too small on such drives)."""
+    (0.66 for f1 and 0.63 for ζ here; the previous MAD rule's gave 1.29 and 1.50)."""
     rng = np.random.default_rng(21)
     pulls = {"f1": [], "zeta": []}
     for _ in range(8):
@@ -226,4 +226,4 @@ def test_the_pulls_over_short_road_drives_scatter_by_about_one():
         pulls["f1"].append((fit.f1_hz - f1) / fit.f1_std)
         pulls["zeta"].append((fit.zeta - zeta) / fit.zeta_std)
     for p in pulls.values():
-        assert 0.3 < math.sqrt(np.mean(np.square(p))) < 1.6
+        assert 0.3 < math.sqrt(np.mean(np.square(p))) < 1.25
