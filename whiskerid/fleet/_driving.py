@@ -84,8 +84,8 @@ ECHO_S = (0.3, 4.0)
 OUTLIER_MADS = 5.0
 #: ζ's bias that every block shares, so that their spread cannot show it (relative): on
 #: simulated drives of two generators written apart (the terrain simulator's and one in
-#: NumPy/SciPy alone, 40 drives each) ζ read 4.9 and 3.6 % low on average, 2–3 % for ζ
-#: below 0.035 and 6–8 % above 0.05 (a broad peak's wings reach the band's edges, where
+#: NumPy/SciPy alone, 40 drives each) ζ read 4.9 and 3.6 % low on average, 2–3.5 % for
+#: ζ below 0.035 and 6.3 % above 0.05 (a broad peak's wings reach the band's edges, where
 #: the smooth base takes part of them). It is not corrected (its size depends on the
 #: base); the 1σ of ζ carries it in quadrature.
 ZETA_SYSTEMATIC = 0.04
