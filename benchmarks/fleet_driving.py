@@ -141,6 +141,10 @@ def _summary(entries):
         "median_f1_std_pct": float(np.median([100 * d["f1_std"] / d["f1_true"] for d in ok])),
         "median_zeta_std_pct": float(np.median([100 * d["zeta_std"] / d["zeta_true"] for d in ok])),
         "f1_pull_sd": float(np.std(p1, ddof=1)), "zeta_pull_sd": float(np.std(pz, ddof=1)),
+        # with a bias the pulls' root mean square is what a z-score sees
+        "f1_pull_rms": float(np.sqrt(np.mean(p1**2))),
+        "zeta_pull_rms": float(np.sqrt(np.mean(pz**2))),
+        "f1_pull_mean": float(np.mean(p1)), "zeta_pull_mean": float(np.mean(pz)),
         "f1_pulls_beyond_3": int(np.sum(np.abs(p1) > 3)),
         "zeta_pulls_beyond_3": int(np.sum(np.abs(pz) > 3)),
     }  # fmt: skip
