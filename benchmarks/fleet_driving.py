@@ -26,6 +26,9 @@ with f1 3 % lower (``--drop``) from drive ``--first`` on; every drive is a sessi
 health log and :func:`whiskerid.fleet.check_fleet` reads them: the detection rate, the drives
 it took, and the false alarms per healthy whisker-session.
 
+``--save-blocks FILE`` appends each drive with its blocks' values (JSON lines): how the blocks
+are combined can then be studied without fitting again.
+
 Run: ``python benchmarks/fleet_driving.py [--drives 10 --independent 10 --detect 10]``; the
 detection fleet can be split over processes (``--whiskers 0 1 2 --save-rows a.json`` in each,
 then ``--load-rows a.json b.json``).
@@ -138,9 +141,20 @@ def _summary(entries):
         "median_f1_std_pct": float(np.median([100 * d["f1_std"] / d["f1_true"] for d in ok])),
         "median_zeta_std_pct": float(np.median([100 * d["zeta_std"] / d["zeta_true"] for d in ok])),
         "f1_pull_sd": float(np.std(p1, ddof=1)), "zeta_pull_sd": float(np.std(pz, ddof=1)),
+        # with a bias the pulls' root mean square is what a z-score sees
+        "f1_pull_rms": float(np.sqrt(np.mean(p1**2))),
+        "zeta_pull_rms": float(np.sqrt(np.mean(pz**2))),
+        "f1_pull_mean": float(np.mean(p1)), "zeta_pull_mean": float(np.mean(pz)),
         "f1_pulls_beyond_3": int(np.sum(np.abs(p1) > 3)),
         "zeta_pulls_beyond_3": int(np.sum(np.abs(pz) > 3)),
     }  # fmt: skip
+
+
+def _print(entry, fit, args):
+    print(json.dumps(entry), flush=True)
+    if args.save_blocks:  # each drive's blocks, to study how they are combined
+        with open(args.save_blocks, "a") as fh:
+            fh.write(json.dumps({**entry, "blocks": fit.blocks}) + "\n")
 
 
 def accuracy(args, f1_start, zeta_start):
@@ -154,7 +168,7 @@ def accuracy(args, f1_start, zeta_start):
         t0 = time.perf_counter()
         fit = identify_driving(signals, RATE, f1_start, zeta_start)
         out.append(_entry("terrain", k + 1, f1, zeta, fit, time.perf_counter() - t0))
-        print(json.dumps(out[-1]), flush=True)
+        _print(out[-1], fit, args)
     for k in range(args.independent):
         rng = np.random.default_rng(5000 + k)
         f1, zeta = rng.uniform(30, 70), rng.uniform(0.02, 0.07)
@@ -162,9 +176,16 @@ def accuracy(args, f1_start, zeta_start):
         t0 = time.perf_counter()
         fit = identify_driving(signals, RATE, f1 * rng.uniform(0.96, 1.04), 0.04)
         out.append(_entry("independent", 5000 + k, f1, zeta, fit, time.perf_counter() - t0))
-        print(json.dumps(out[-1]), flush=True)
+        _print(out[-1], fit, args)
     kinds = [k for k in ("terrain", "independent") if any(d["kind"] == k for d in out)]
     return {kind: _summary([d for d in out if d["kind"] == kind]) for kind in kinds}
+
+
+def _upper95(k: int, n: int) -> float:
+    """One-sided 95 % upper bound (Clopper–Pearson) on a rate seen k times in n."""
+    from scipy.stats import beta
+
+    return float(beta.ppf(0.95, k + 1, n - k)) if n > k else 1.0
 
 
 def detection(args, f1_start, zeta_start):
@@ -196,16 +217,18 @@ def detection(args, f1_start, zeta_start):
     result = check_fleet(rows)
     events = {e["whisker"]: e for e in result.events if e["parameter"] == "f1_hz"}
     flagged = {(f["whisker"], f["session"]) for f in result.flags}  # either parameter
-    flagged_f1 = {(f["whisker"], f["session"]) for f in result.flags if f["parameter"] == "f1_hz"}
     checked = {(c["whisker"], c["session"]) for c in result.changes if c["parameter"] == "f1_hz"}
     healthy = {(w, s) for w, s in checked
                if w.split()[0] not in damaged or int(s[-2:]) < damaged[w.split()[0]]}  # fmt: skip
-    delays = []
+    delays = []  # drives after the damage (incl.) until the one that *found* the change
     for w, first in damaged.items():
-        hits = sorted(
-            int(s[-2:]) for ww, s in flagged_f1 if ww.split()[0] == w and int(s[-2:]) >= first
-        )
-        delays.append(hits[0] - first + 1 if hits else None)  # drives after the damage, incl.
+        found_at = [int(e["detected"][-2:]) for ww, e in events.items() if ww.split()[0] == w]
+        delays.append(found_at[0] - first + 1 if found_at and found_at[0] >= first else None)
+    located = sum(
+        int(e["began"][-2:]) == damaged[w.split()[0]]
+        for w, e in events.items()
+        if w.split()[0] in damaged
+    )
     found = [d for d in delays if d is not None]
     return {
         "whiskers": args.detect, "damaged": len(damaged), "sessions": args.sessions,
@@ -216,7 +239,9 @@ def detection(args, f1_start, zeta_start):
         "healthy_sessions_checked": len(healthy),
         "false_alarms": len(flagged & healthy),
         "false_alarm_rate": len(flagged & healthy) / max(len(healthy), 1),
-        "f1_events": {w: {k: e.get(k) for k in ("began", "size_pct", "kind")}
+        "false_alarm_rate_95pct_upper": _upper95(len(flagged & healthy), len(healthy)),
+        "located_where_it_began": located,
+        "f1_events": {w: {k: e.get(k) for k in ("began", "detected", "size_pct", "rule")}
                       for w, e in events.items()},
     }  # fmt: skip
 
@@ -233,6 +258,7 @@ def main() -> None:
     ap.add_argument("--first", type=int, default=3, help="first drive with the drop (0-based)")
     ap.add_argument("--drop", type=float, default=0.03, help="relative f1 drop (detection)")
     ap.add_argument("--whiskers", type=int, nargs="*", help="only these whiskers (detection)")
+    ap.add_argument("--save-blocks", help="append each drive with its blocks (JSON lines)")
     ap.add_argument("--save-rows", help="write the detection fleet's health rows (JSON)")
     ap.add_argument("--load-rows", nargs="*", default=[], help="rows of earlier runs (JSON)")
     args = ap.parse_args()

@@ -241,8 +241,8 @@ def _cmd_drive(args) -> dict:
             f"{fit.f1_std:.2g} Hz, zeta {fit.zeta:.3g} ± {fit.zeta_std:.2g} from {used} of "
             f"{len(fit.blocks)} block(s), {fit.seconds:.0f} s of driving; wrote {log}")  # fmt: skip
     return {"log": str(log), "status": fit.status, "f1_hz": fit.f1_hz, "f1_std": fit.f1_std,
-            "zeta": fit.zeta, "zeta_std": fit.zeta_std, "seconds": fit.seconds,
-            "blocks": fit.blocks}  # fmt: skip
+            "zeta": fit.zeta, "zeta_std": fit.zeta_std, "f1_dof": fit.f1_dof,
+            "zeta_dof": fit.zeta_dof, "seconds": fit.seconds, "blocks": fit.blocks}  # fmt: skip
 
 
 # --------------------------------------------------------------------------- calibrate

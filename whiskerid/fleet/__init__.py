@@ -24,8 +24,10 @@ from ._check import FleetCheck as FleetCheck
 from ._check import WhiskerHistory as WhiskerHistory
 from ._check import check_fleet as check_fleet
 from ._driving import DriveFit as DriveFit
+from ._driving import combine_blocks as combine_blocks
 from ._driving import health_row as health_row
 from ._driving import identify_driving as identify_driving
+from ._driving import mad_factor as mad_factor
 from ._layout import LayoutError as LayoutError
 from ._layout import Session as Session
 from ._layout import discover as discover

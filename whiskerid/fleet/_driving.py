@@ -22,8 +22,9 @@ modelled with both (their parameters found in the data, not given):
 1. the drive is cut into blocks (each recording, or each :data:`BLOCK_S` of it); each
    block's spectrum is Welch's average of Hann windows of :data:`SEGMENT_S`;
 2. narrow lines (the motor's tone, periodic textures) are masked: bins more than
-   :data:`LINE_FACTOR` times the running median over ``±max(1 Hz, 2ζf_1)`` (wider than
-   the resonance, so that its peak is never taken for a line), and two bins either side;
+   :data:`LINE_FACTOR` times the running median over ``±``:data:`LINE_HALF_HZ` (wider
+   than a line's few bins, narrower than any resonance's half-width ``ζf_1``, so that the
+   peak's top is never taken for a line whatever the start ζ), and two bins either side;
 3. the echo's delay τ is the peak of the cepstrum of the block's whole log-spectrum
    (:func:`echo_delay`: the ripple runs over every frequency, the resonance over a few Hz);
 4. each block's log-spectrum over ``[0.8, 1.25] f_1`` is fitted by
@@ -32,10 +33,17 @@ modelled with both (their parameters found in the data, not given):
    started from a grid of places (:data:`NULLS`, and none), with a Cauchy loss (scale 0.5
    in ln) against what is left (a line the mask missed); a first pass with a smooth base
    centres the band on the whisker's f_1 as it is now;
-5. the drive's f_1 and ζ are the medians of the blocks', their 1σ the medians' standard
-   errors from the blocks' spread, ``1.253 · 1.4826 MAD / √n`` (the blocks are
-   independent stretches of driving, so their spread holds the base's leftovers as well as
-   the periodogram's noise).
+5. the drive's f_1 and ln ζ are the medians of the blocks', their 1σ ``c_n s/√m``
+   (:func:`combine_blocks`): ``s`` the standard deviation of the ``m`` inlier blocks (a
+   block more than :data:`OUTLIER_MADS` robust σ from the median is left out of it, the
+   robust σ being ``1.4826 MAD`` with its small-sample factor, :func:`mad_factor`) and
+   ``c_n`` the standard deviation of ``(median − truth)/(s/√m)`` for ``n`` normal blocks
+   (1.37 for ten: the median's lower efficiency and the spread's own uncertainty at
+   ``m − 1`` degrees of freedom). The blocks are independent stretches of driving, so their
+   spread holds the base's leftovers as well as the periodogram's noise. (The earlier
+   ``1.253 · 1.4826 MAD/√n`` looked the same, but a ten-value MAD is so uncertain that the
+   errors over it scattered by 1.34 even for normal blocks.) ζ's 1σ also carries
+   :data:`ZETA_SYSTEMATIC`, a bias all blocks share.
 
 A drive is a *session* of the whisker's health log (``FLEET/health.csv``, the fleet table's
 columns; each block takes a pluck's place), which ``whiskerid fleet check`` reads beside
@@ -57,12 +65,30 @@ BLOCK_S = 60.0
 BAND = (0.8, 1.25)
 #: Bins this many times above the running median are lines, not resonance.
 LINE_FACTOR = 3.0
+#: Half-width (Hz) of that running median: a line's Hann main lobe is ±2 bins (±0.2 Hz),
+#: a resonance's half-width ``ζf_1`` at least 0.3 Hz (ζ 0.01 at 30 Hz), over which its
+#: median is within 1.3 times its top. (A window scaled with the start ζ, ``±2ζf_1``, was
+#: up to four half-widths of a whisker whose ζ is half the start's: the peak's top was
+#: masked as a line and ζ came out 10–25 % high on such drives.)
+LINE_HALF_HZ = 0.5
 #: Scale of the Cauchy loss on the log-spectrum's residuals.
 LOSS_SCALE = 0.5
 #: Order of the polynomial (in ln f) standing for the base's spectrum over the band.
 ORDER = 2
 #: Delays of the base motion's echo searched (s): a wheelbase over the speed.
 ECHO_S = (0.3, 4.0)
+#: A block further than this many robust σ (:func:`robust_sigma`) from the drive's median
+#: f_1 or ln ζ is an outlier: left out of the spread behind the drive's 1σ (the value, a
+#: median, hardly moves), and marked ``outlier`` in the health log (kept out of the blocks'
+#: spread that ``fleet check`` reads).
+OUTLIER_MADS = 5.0
+#: ζ's bias that every block shares, so that their spread cannot show it (relative): on
+#: simulated drives of two generators written apart (the terrain simulator's and one in
+#: NumPy/SciPy alone, 40 drives each) ζ read 4.9 and 3.6 % low on average, 2–3.5 % for
+#: ζ below 0.035 and 6.3 % above 0.05 (a broad peak's wings reach the band's edges, where
+#: the smooth base takes part of them). It is not corrected (its size depends on the
+#: base); the 1σ of ζ carries it in quadrature.
+ZETA_SYSTEMATIC = 0.04
 #: Start places of the contact patch's null searched, relative to f_1.
 NULLS = tuple(np.linspace(0.7, 1.5, 9))
 
@@ -77,6 +103,8 @@ class DriveFit:
         zeta, zeta_std: Its damping ratio and 1σ.
         blocks: Per block: ``name``, ``f1_hz``, ``zeta``, ``status``.
         seconds: Driving time used (s).
+        f1_dof, zeta_dof: Degrees of freedom of the 1σ (inlier blocks less one): a z-score
+            against it has t-like tails (the 1σ already holds their spread).
     """
 
     status: str
@@ -86,6 +114,8 @@ class DriveFit:
     zeta_std: float = math.nan
     blocks: list[dict] = field(default_factory=list)
     seconds: float = 0.0
+    f1_dof: int = 0
+    zeta_dof: int = 0
 
 
 def _blocks(signals, rate_hz: float, block_s: float):
@@ -112,12 +142,12 @@ def block_spectrum(y, rate_hz: float, *, segment_s: float = SEGMENT_S):
                  detrend="linear")  # fmt: skip
 
 
-def line_mask(f, p, f1_hz: float, zeta: float) -> np.ndarray:
+def line_mask(f, p) -> np.ndarray:
     """True where a bin is not a narrow line (see the module docstring)."""
     from scipy.ndimage import median_filter
 
     df = float(f[1] - f[0])
-    half = max(1.0, 2 * zeta * f1_hz)
+    half = max(LINE_HALF_HZ, 5 * df)
     med = median_filter(p, size=2 * int(half / df) + 1, mode="nearest")
     line = p >= LINE_FACTOR * med
     return ~(np.convolve(line, np.ones(5), "same") > 0)
@@ -164,7 +194,7 @@ def fit_block(f, p, f1_hz: float, zeta: float, *, base: bool = True) -> tuple[fl
     from scipy.optimize import least_squares
 
     keep = (f > BAND[0] * f1_hz) & (f < BAND[1] * f1_hz) & (p > 0)
-    keep &= line_mask(f, p, f1_hz, zeta)
+    keep &= line_mask(f, p)
     if keep.sum() < 4 * (ORDER + 7):
         return math.nan, math.nan, "too few bins"
     ff, lp = f[keep], np.log(p[keep])
@@ -207,13 +237,66 @@ def fit_block(f, p, f1_hz: float, zeta: float, *, base: bool = True) -> tuple[fl
     return f1, z, "ok"
 
 
-def _median_and_error(values) -> tuple[float, float]:
+#: Croux & Rousseeuw's (1992) small-sample factors making ``1.4826 MAD`` of ``n`` normal
+#: values an unbiased σ, ``n`` = 2 … 9 (beyond, ``n/(n − 0.8)``).
+_MAD_SMALL = {2: 1.196, 3: 1.495, 4: 1.363, 5: 1.206, 6: 1.200, 7: 1.140, 8: 1.129, 9: 1.107}
+
+
+def mad_factor(n: int) -> float:
+    """Factor making ``1.4826 · MAD`` of ``n`` normal values an unbiased σ (``n ≥ 2``)."""
+    return _MAD_SMALL.get(n, n / (n - 0.8))
+
+
+def robust_sigma(values) -> float:
+    """``1.4826 · MAD · mad_factor(n)``: a σ of ``values`` that a few outliers hardly move."""
     v = np.asarray(values, dtype=float)
-    med = float(np.median(v))
-    if v.size < 3:
-        return med, math.nan
-    mad = 1.4826 * float(np.median(np.abs(v - med)))
-    return med, 1.2533 * mad / math.sqrt(v.size)
+    mad = float(np.median(np.abs(v - np.median(v))))
+    return 1.4826 * mad * mad_factor(v.size) if v.size > 1 else math.nan
+
+
+#: Fewest blocks from which an outlier is ever left out: with fewer, a MAD is too often
+#: small by chance (half the values close together) and a rejection leaves a spread that is
+#: far too tight; every block is kept and a far one widens the 1σ.
+MIN_FOR_OUTLIERS = 8
+#: For ``n`` blocks: the standard deviation of ``(median − truth)/(s/√m)`` for normal
+#: blocks, ``s`` the standard deviation of the ``m`` inliers (3·10⁵ Monte-Carlo draws per
+#: ``n``; it holds the median's lower efficiency, the spread's own uncertainty and what
+#: leaving outliers out does). Beyond 20 blocks, 1.25 (the median's large-``n`` factor
+#: √(π/2) with what the spread adds).
+_MEDIAN_SD = {4: 1.809, 5: 1.560, 6: 1.398, 7: 1.408, 8: 1.579, 9: 1.544, 10: 1.367,
+              11: 1.404, 12: 1.314, 13: 1.344, 14: 1.291, 15: 1.318, 16: 1.273, 17: 1.304,
+              18: 1.274, 19: 1.297, 20: 1.267}  # fmt: skip
+
+
+def inliers(values) -> np.ndarray:
+    """True for the values within :data:`OUTLIER_MADS` robust σ of their median (all of
+    them with fewer than :data:`MIN_FOR_OUTLIERS` values)."""
+    v = np.asarray(values, dtype=float)
+    if v.size < MIN_FOR_OUTLIERS:
+        return np.ones(v.size, bool)
+    return np.abs(v - np.median(v)) <= OUTLIER_MADS * robust_sigma(v)
+
+
+def combine_blocks(values) -> tuple[float, float, int]:
+    """The drive's value, its 1σ and degrees of freedom from its blocks' values.
+
+    The median (robust to a block that a null pulled off), with 1σ ``c_n s/√m``: ``s`` the
+    standard deviation of the ``m`` inliers (:func:`inliers`), ``c_n`` the standard
+    deviation of ``(median − truth)/(s/√m)`` for ``n`` normal blocks (1.37 for ten). The
+    earlier ``1.253 · 1.4826 MAD/√n`` has the same mean but a ten-value MAD is so uncertain
+    that its errors over the 1σ scattered by 1.34 for normal blocks (0.1 % beyond 7.8,
+    not 3.3); ``s`` has ``ν = m − 1`` degrees of freedom, reported with the value (the
+    errors over the 1σ scatter by 1, with t-like tails of about ν degrees of freedom).
+
+    Returns:
+        ``(value, sigma, dof)``; sigma NaN with fewer than 4 values.
+    """
+    v = np.asarray(values, dtype=float)
+    if v.size < 4:
+        return (float(np.median(v)) if v.size else math.nan), math.nan, max(v.size - 1, 0)
+    w = v[inliers(v)]
+    scale = _MEDIAN_SD.get(v.size, 1.25)
+    return float(np.median(v)), float(np.std(w, ddof=1)) / math.sqrt(w.size) * scale, w.size - 1
 
 
 def identify_driving(
@@ -223,7 +306,7 @@ def identify_driving(
     zeta: float,
     *,
     block_s: float = BLOCK_S,
-    min_blocks: int = 3,
+    min_blocks: int = 4,
 ) -> DriveFit:
     """f_1 and ζ of a whisker from its driving signals (see the module docstring).
 
@@ -234,7 +317,8 @@ def identify_driving(
         f1_hz: Start value of f_1 (the whisker's record or last calibration, Hz).
         zeta: Start value of ζ.
         block_s: Longest block (s); a recording is cut into blocks of this length.
-        min_blocks: Fewest usable blocks for a value with a 1σ.
+        min_blocks: Fewest usable blocks for a value with a 1σ (at least 4: with ν = 2
+            degrees of freedom or fewer the standard error's t has no finite spread).
 
     Returns:
         A :class:`DriveFit`.
@@ -253,25 +337,24 @@ def identify_driving(
     centre = f1_hz
     # a quick look (a smooth base) centres the band on the whisker's f_1 as it is now
     quick = [fit_block(f, p, centre, zeta, base=False) for _, f, p in spectra]
-    good = [f1 for f1, _, s in quick if s == "ok"]
-    if good:
-        centre = float(np.median(good))
-    fits = [(name, *fit_block(f, p, centre, zeta)) for name, f, p in spectra]
+    good = [(f1, z) for f1, z, s in quick if s == "ok"]
+    start = zeta
+    if good:  # and starts ζ there (the null and the ripple are searched from it)
+        centre, start = (float(np.median(v)) for v in zip(*good, strict=True))
+    fits = [(name, *fit_block(f, p, centre, start)) for name, f, p in spectra]
     blocks = [{"name": n, "f1_hz": f1, "zeta": z, "status": s} for n, f1, z, s in
               (fits if spectra else [])]  # fmt: skip
     good = [b for b in blocks if b["status"] == "ok"]
     if len(good) < min_blocks:
         why = "too short" if len(spectra) < min_blocks else "no resonance"
         return DriveFit(why, blocks=blocks, seconds=seconds)
-    f1, f1_std = _median_and_error([b["f1_hz"] for b in good])
-    z, z_std = _median_and_error([b["zeta"] for b in good])
-    return DriveFit("ok", f1, f1_std, z, z_std, blocks, seconds)
-
-
-#: A block further than this many robust σ (1.4826 MAD) from the drive's median f_1 or ln ζ
-#: is an outlier in the health log: kept out of the blocks' spread that ``fleet check`` reads
-#: (the drive's values are medians, which such a block hardly moves).
-OUTLIER_MADS = 3.5
+    f1, f1_std, f1_dof = combine_blocks([b["f1_hz"] for b in good])
+    ln_z, ln_z_std, zeta_dof = combine_blocks([math.log(b["zeta"]) for b in good])
+    z = math.exp(ln_z)  # ζ's blocks scatter in proportion (a geometric mean)
+    if not (math.isfinite(f1_std) and math.isfinite(ln_z_std)):
+        return DriveFit("too short", blocks=blocks, seconds=seconds)
+    z_std = z * math.hypot(ln_z_std, ZETA_SYSTEMATIC)
+    return DriveFit("ok", f1, f1_std, z, z_std, blocks, seconds, f1_dof, zeta_dof)
 
 
 def _outliers(blocks) -> set[int]:
@@ -280,10 +363,8 @@ def _outliers(blocks) -> set[int]:
     if len(ok) < 3:
         return out
     for key, fn in (("f1_hz", float), ("zeta", math.log)):
-        v = np.array([fn(blocks[i][key]) for i in ok])
-        med = float(np.median(v))
-        scale = 1.4826 * float(np.median(np.abs(v - med)))
-        out |= {i for i, x in zip(ok, v, strict=True) if abs(x - med) > OUTLIER_MADS * scale}
+        keep = inliers([fn(blocks[i][key]) for i in ok])
+        out |= {i for i, k in zip(ok, keep, strict=True) if not k}
     return out
 
 
@@ -305,7 +386,10 @@ def health_row(whisker: str, session: str, fit: DriveFit, files: list[str]) -> d
         zeta=f"{fit.zeta:.10g}",
         zeta_std=f"{fit.zeta_std:.4g}",
         uncertainty="blocks",
-        checks=f"{fit.seconds:.0f} s of driving, {len(ok)} of {len(fit.blocks)} blocks used",
+        checks=(
+            f"{fit.seconds:.0f} s of driving, {len(ok)} of {len(fit.blocks)} blocks used; "
+            f"1 sigma with {fit.f1_dof} (f1), {fit.zeta_dof} (zeta) degrees of freedom"
+        ),
         n_plucks=len(fit.blocks),
         f1_plucks=";".join(f"{b['f1_hz']:.10g}" for b in fit.blocks),
         zeta_plucks=";".join(f"{b['zeta']:.10g}" for b in fit.blocks),
