@@ -25,7 +25,9 @@ freedom as columns under a linear whisker. A statistic beyond its χ² quantile 
 :data:`MIN_REL_CHANGE_F` in f, or both statistics beyond it whatever the change, marks the
 linear fit ``check``; a Gauss–Newton step along
 ``[J, Z]`` estimates what the data found (``ζ`` and ``f`` at the largest and smallest
-amplitudes, or early and late), and the message says it.
+amplitudes, or early and late), and the message says it. A fit not rejected, whose data
+still prefer the nonlinear terms by BIC, keeps ``ok`` with a model-error term in its 1σ
+(:mod:`._model_error`).
 """
 
 import numpy as np
@@ -34,6 +36,7 @@ from ._checks import hac_covariance
 from ._chi2 import chi2_sf
 from ._core import _padded as padded_problem
 from ._core import unflatten_numpy
+from ._model_error import apply_model_error, model_error
 from ._noise_floor import check_noise_floor
 from ._nonlinear import tip_per_sensor
 from ._problem import ZETA_MAX, residuals_and_jacobian
@@ -116,6 +119,7 @@ def amplitude_test(cal, *, resid=None, jac=None, core=None) -> dict:
     out["message"] = found[best][2] if best else ""
     for k in ("nonlinear", "split"):
         out[k].pop("linear_step")
+    out["model_error"] = model_error(cal, jac, r, cols)
     return out
 
 
@@ -309,6 +313,8 @@ def finish(cal, observations, model: str, terms=None, *, resid=None, jac=None, c
                 cal.status = "check"
             cal.record.extra["fit"]["status"] = cal.status
             cal.record.extra["fit"]["warnings"] = list(cal.warnings)
+        elif test["model_error"]["preferred"]:
+            apply_model_error(cal, test["model_error"])
     check_noise_floor(cal, observations, _LINEAR_ADVICE)
     if model == "linear" or (model == "auto" and not (test and test["rejects"])):
         return cal
