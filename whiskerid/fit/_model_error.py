@@ -56,14 +56,14 @@ def _subset_statistics(jac, r, zs, sizes):
 def step_map(jac, z, idx) -> np.ndarray:
     """``X`` with ``Xᵀr`` the least-squares step of parameters ``idx`` along ``[J, Z]``
     from residuals ``r`` (minimising ``|r + [J, Z]δ|²``): ``−(A⁺)ᵀ`` restricted to ``idx``,
-    ``A⁺ = R⁻¹Qᵀ`` of the column-scaled ``A = [J, Z]``. At the optimum of ``J`` alone
+    ``A⁺ = R⁺Qᵀ`` of the column-scaled ``A = [J, Z]``. At the optimum of ``J`` alone
     (``Jᵀr = 0``) that step is the difference of the two models' estimates; ``X`` is taken
     off ``J``'s columns, so that ``σ²XᵀX`` is its variance."""
     a = np.concatenate([jac, z], axis=1)
     scale = np.linalg.norm(a, axis=0)
     scale = np.where(scale > 0, scale, 1.0)
     q, rr = np.linalg.qr(a / scale)
-    x = -(q @ np.linalg.inv(rr).T[:, idx]) / scale[idx]
+    x = -(q @ np.linalg.pinv(rr).T[:, idx]) / scale[idx]
     # off J's columns: the same step from any residual orthogonal to them, and
     # Var(Xᵀr) = σ²XᵀX, the difference of the two fits' variances (Hausman)
     coef, *_ = np.linalg.lstsq(jac / scale[: jac.shape[1]], x, rcond=None)
@@ -111,6 +111,8 @@ def model_error(cal, jac, r, cols) -> dict:
     out["f1_hz"] = {"bias": -0.5 * f1 * float(delta[0]), "std": 0.5 * f1 * float(np.sqrt(var[0]))}
     out["zeta"] = {"bias": -dzeta_du * float(delta[1]), "std": dzeta_du * float(np.sqrt(var[1]))}
     out["hac_lag"] = int(lag)
+    finite = all(np.isfinite(out[k][v]) for k in ("f1_hz", "zeta") for v in ("bias", "std"))
+    out["preferred"] = bool(out["preferred"] and finite)
     return out
 
 
