@@ -67,3 +67,34 @@ def test_model_error_reaches_f1_zeta_and_what_derives_from_kappa():
     assert cal.record.extra["fit"]["params"]["f1_hz"]["std"] == p["f1_hz"]["std"]
     assert cal.status == "ok" and "--model nonlinear" in cal.warnings[0]
     assert cal.diagnostics["model_error"]["terms"] == ["cubic"]
+
+
+@pytest.mark.slow
+def test_a_strongly_damped_linear_pluck_is_not_amplitude_dependent():
+    """A held linear pluck (the project's simulator: all modes, ADS1115 codes; 73 Hz, ζ 0.073,
+    200 Hz, a 78-sample decay) with white residuals: the fit's HAC rule took 19 lags of
+    them and the score test rejected it (p = 2e-5); the test's own lag rule takes none."""
+    from dataclasses import replace
+
+    from whiskerid.fit import calibrate, observations_from_recording
+    from whiskerid.model import paper_record, simulate_pluck
+
+    base = paper_record()
+    s = base.structure
+    zeta = 0.07271259494356865
+    stiffer = replace(s, shear_modulus_pa=s.shear_modulus_pa * 1.5858851506994818**2)
+    truth = base.replace(structure=stiffer, zeta=zeta)
+    f1 = float(truth.whisker().natural_frequencies_hz[0])
+    decay_s = float(np.clip(4.6 / (2 * np.pi * f1 * zeta), 0.3, 5.0))
+    rng = np.random.default_rng(206)
+    hold = float(rng.uniform(0.1, 1.0))
+    opts = dict(drift=float(rng.uniform(-0.05, 0.05)), tremor=float(rng.uniform(0.0, 0.02)),
+                noise_db=float(rng.uniform(30, 45)))  # fmt: skip
+    rec, _ = simulate_pluck(truth, kind="held", observable="adc", rate_hz=200.0, hold_s=hold,
+                            seed=206, duration_s=0.6 + hold + decay_s, release_s=0.5 + hold,
+                            **opts)  # fmt: skip
+    cal = calibrate(base, observations_from_recording(rec, base, observable="adc"))
+    test = cal.diagnostics["amplitude_test"]
+    assert "amplitude-dependent" not in cal.checks, test
+    assert test["nonlinear"]["hac_lag"] == 0 and test["nonlinear"]["p_value"] > 1e-2
+    assert abs(cal.params["zeta"]["value"] - zeta) < 3 * cal.params["zeta"]["std"]

@@ -34,7 +34,6 @@ release or the modes left out leave a misfit): their 1σ then grows, their value
 
 import numpy as np
 
-from ._checks import hac_covariance
 from ._core import unflatten_numpy
 from ._problem import ZETA_MAX
 
@@ -83,7 +82,7 @@ def model_error(cal, jac, r, cols) -> dict:
         (``T_S − |S| ln n``), and for ``f1_hz`` and ``zeta`` the bias ``b`` (linear minus
         ``a → 0``) and its 1σ ``std``, in the reported units.
     """
-    from ._amplitude import NONLINEAR, _gauss_newton
+    from ._amplitude import NONLINEAR, _gauss_newton, score_meat
 
     zs = np.concatenate([c["nonlinear"] for c in cols], axis=0)
     sizes = [c["n"] for c in cols]
@@ -103,7 +102,7 @@ def model_error(cal, jac, r, cols) -> dict:
     for m in sizes:
         blocks.append((x[start : start + m], r_alt[start : start + m], True))
         start += m
-    meat, lag = hac_covariance(blocks, np.eye(2))
+    meat, lag = score_meat(blocks)
     var = np.maximum(np.diag(meat), float(np.mean(r_alt**2)) * np.sum(x**2, axis=0))
     f1 = float(cal.params["f1_hz"]["value"])
     zeta = float(cal.params["zeta"]["value"])
