@@ -30,7 +30,7 @@ import numpy as np
 
 from ..fit import calibrate
 from ._likelihood import _log_prior, _pack, _unpack
-from ._prior import PosteriorError, default_prior, prior_log_norm
+from ._prior import PosteriorError, prior_arrays, prior_table
 from ._setup import Problem, _names
 
 #: The record's ``[fit.nonlinear]`` coefficient of each term.
@@ -193,20 +193,12 @@ def setup_nonlinear(record, obs, *, n_modes, pin, likelihood, nu, marginalize, u
     names = _names(cal.optimum, n_rec)
     names = [_term_name(n, problem.terms) for n in names]
     f1_hat = float(cal.params["f1_hz"]["value"])
-    priors = {k: {"dist": v[0], "a": v[1], "b": v[2], "default": True}
-              for k, v in default_prior(f1_hat).items()}  # fmt: skip
-    if "kappa" in user_prior:
-        priors.pop("f1_hz")
-    for k, v in user_prior.items():
-        priors[k] = {"dist": v[0], "a": v[1], "b": v[2], "default": False}
+    priors = prior_table(f1_hat, user_prior)
     priors["nl"] = {"dist": "flat", "terms": list(problem.terms), "default": True}
     sampled = {k: p for k, p in priors.items() if k != "nl"}
     args = {
         "problem": problem,
-        "prior": {
-            k: jnp.asarray([p["a"], p["b"], float(prior_log_norm(p["dist"], p["a"], p["b"]))])
-            for k, p in sampled.items()
-        },
+        "prior": prior_arrays(sampled),
         "nu": jnp.asarray(float(nu)),
     }
     model = _NonlinearModel(

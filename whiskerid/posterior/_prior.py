@@ -95,3 +95,27 @@ def default_prior(f1_hz: float) -> dict[str, tuple[str, float, float]]:
         "f1_hz": ("loguniform", f1_hz / 10, f1_hz * 10),
         "sigma_rel": ("loguniform", 1e-6, 10.0),
     }
+
+
+def prior_table(f1_hz: float, user: dict) -> dict[str, dict]:
+    """The priors of a posterior, name → ``{"dist", "a", "b", "default"}``: the record's
+    ``[prior]`` (``user``, parsed) over :func:`default_prior`; a prior on ``kappa`` replaces
+    the default one on ``f1_hz`` (the same stiffness)."""
+    priors = {
+        k: {"dist": v[0], "a": v[1], "b": v[2], "default": True}
+        for k, v in default_prior(f1_hz).items()
+    }
+    if "kappa" in user:
+        priors.pop("f1_hz")
+    for k, v in user.items():
+        priors[k] = {"dist": v[0], "a": v[1], "b": v[2], "default": False}
+    return priors
+
+
+def prior_arrays(priors: dict[str, dict]) -> dict:
+    """``{name: [a, b, log normaliser]}`` of :func:`prior_table`'s entries, as the
+    log-probability's arguments take them."""
+    return {
+        k: jnp.asarray([p["a"], p["b"], float(prior_log_norm(p["dist"], p["a"], p["b"]))])
+        for k, p in priors.items()
+    }

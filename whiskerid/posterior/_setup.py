@@ -13,7 +13,7 @@ from ..fit import Observation, calibrate
 from ..model import WhiskerRecord
 from ._grid import _TAYLOR_MARGIN, _decay_grid, _taylor_degree
 from ._likelihood import _batch_fn, _drop_c, _Model, _pack
-from ._prior import PosteriorError, default_prior, parse_prior, prior_log_norm
+from ._prior import PosteriorError, parse_prior, prior_arrays, prior_table
 
 
 # --------------------------------------------------------------------------- setup
@@ -166,14 +166,7 @@ def setup_posterior(
 
     w_hat = problem.whisker(theta_s)
     f1_hat = float(w_hat.natural_frequencies_hz[0])
-    priors = {
-        k: {"dist": v[0], "a": v[1], "b": v[2], "default": True}
-        for k, v in default_prior(f1_hat).items()
-    }
-    if "kappa" in user:
-        priors.pop("f1_hz")
-    for k, v in user.items():
-        priors[k] = {"dist": v[0], "a": v[1], "b": v[2], "default": False}
+    priors = prior_table(f1_hat, user)
     # Free decays on near-uniform timestamps get the gridded columns, with Taylor degrees
     # for the Laplace centre's frequencies (times a margin).
     grids, grid_degrees = [], []
@@ -191,10 +184,7 @@ def setup_posterior(
     args = {
         "problem": problem,
         "grids": grids,
-        "prior": {
-            k: jnp.asarray([p["a"], p["b"], float(prior_log_norm(p["dist"], p["a"], p["b"]))])
-            for k, p in priors.items()
-        },
+        "prior": prior_arrays(priors),
         "nu": jnp.asarray(float(nu)),
     }
     model = _Model(
