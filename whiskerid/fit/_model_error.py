@@ -39,7 +39,8 @@ from ._problem import ZETA_MAX
 
 
 def _subset_statistics(jac, r, zs, sizes):
-    """``{subset: T_S}`` over every non-empty subset of the columns of ``zs``."""
+    """``{subset: (T_S, residuals after the Gauss–Newton step with S)}`` over every
+    non-empty subset of the columns of ``zs``."""
     from ._amplitude import _gauss_newton, _score
 
     out = {}
@@ -48,7 +49,7 @@ def _subset_statistics(jac, r, zs, sizes):
         z = zs[:, idx]
         step = _gauss_newton(jac, r, z)
         r_alt = r + np.concatenate([jac, z], axis=1) @ step
-        out[idx] = _score(jac, r, r_alt, z, sizes)["statistic"]
+        out[idx] = (_score(jac, r, r_alt, z, sizes)["statistic"], r_alt)
     return out
 
 
@@ -82,14 +83,14 @@ def model_error(cal, jac, r, cols) -> dict:
         (``T_S − |S| ln n``), and for ``f1_hz`` and ``zeta`` the bias ``b`` (linear minus
         ``a → 0``) and its 1σ ``std``, in the reported units.
     """
-    from ._amplitude import NONLINEAR, _gauss_newton, score_meat
+    from ._amplitude import NONLINEAR, score_meat
 
     zs = np.concatenate([c["nonlinear"] for c in cols], axis=0)
     sizes = [c["n"] for c in cols]
     ln_n = float(np.log(sum(sizes)))
     stats = _subset_statistics(jac, r, zs, sizes)
-    best = max(stats, key=lambda s: stats[s] - len(s) * ln_n)
-    gain = float(stats[best] - len(best) * ln_n)
+    best = max(stats, key=lambda s: stats[s][0] - len(s) * ln_n)
+    gain = float(stats[best][0] - len(best) * ln_n)
     out = {"preferred": bool(gain > 0), "terms": [NONLINEAR[j] for j in best],
            "ln_n": ln_n, "bic_gain": gain}  # fmt: skip
     z = zs[:, list(best)]
@@ -97,7 +98,7 @@ def model_error(cal, jac, r, cols) -> dict:
     idx = [int(np.ravel(where["log_kappa"])[0]), int(np.ravel(where["zeta_u"])[0])]
     x = step_map(jac, z, idx)
     delta = x.T @ r
-    r_alt = r + np.concatenate([jac, z], axis=1) @ _gauss_newton(jac, r, z)
+    r_alt = stats[best][1]
     blocks, start = [], 0
     for m in sizes:
         blocks.append((x[start : start + m], r_alt[start : start + m], True))
