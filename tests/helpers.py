@@ -4,6 +4,9 @@ Nothing here imports whiskerid's model code: these are separate transcriptions (
 a separate discretisation (finite elements), so agreement means something.
 """
 
+import subprocess
+import sys
+
 import jax.numpy as jnp
 import numpy as np
 import scipy.linalg
@@ -226,3 +229,17 @@ def one_step_chain(path):
                         random_state=np.random.RandomState(0).get_state())  # fmt: skip
     be.save_step(state, np.ones(4, bool))
     return be, state
+
+
+def start_child(script: str, argv: list[str], marker: str):
+    """A Python child running ``script`` with ``argv``, read on stderr up to the line
+    ``marker`` (the stage a test signals at). Returns ``(child, lines before the marker,
+    whether the marker came)``; the child's stderr is left open, read past the marker."""
+    child = subprocess.Popen([sys.executable, "-c", script, *argv], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)  # fmt: skip
+    lines = []
+    for line in child.stderr:
+        if line.strip() == marker:
+            return child, lines, True
+        lines.append(line)
+    return child, lines, False

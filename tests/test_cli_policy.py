@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import start_child
 
 import whiskerid as wi
 from whiskerid.cli import build_parser, main
@@ -170,14 +171,8 @@ def test_a_signal_stops_a_command_with_one_line(tree, sig, command, stage, statu
         "simulate": ["simulate", "--duration", "0.5", "--plot", str(png)],
     }[command] + ["--out", str(out), "--json"]
     script = textwrap.dedent(_CHILD.format(module=module, name=name))
-    child = subprocess.Popen([sys.executable, "-c", script, *argv], stdout=subprocess.PIPE,
-                             stderr=subprocess.PIPE, text=True)  # fmt: skip
-    lines = []
-    for line in child.stderr:
-        if line.strip() == "READY":
-            break
-        lines.append(line)
-    else:
+    child, lines, reached = start_child(script, argv, "READY")
+    if not reached:
         pytest.fail("the child never got to the stage: " + "".join(lines))
     child.send_signal(sig)
     stdout, rest = child.communicate(timeout=60)

@@ -9,6 +9,8 @@ import sys
 import textwrap
 import time
 
+from helpers import start_child
+
 # The child runs the real command line (its own process: the entry point's handlers and
 # exit), with one stage replaced by ``body``.
 _CHILD = """
@@ -53,13 +55,7 @@ def _run(stage: str, body: str, sig: str, argv: list[str]) -> tuple[int, str, fl
     module, name = stage.rsplit(".", 1)
     body = textwrap.indent(textwrap.dedent(body.format(sig=sig)), "    ")
     script = _CHILD.format(module=module, name=name, body=body)
-    child = subprocess.Popen([sys.executable, "-c", script, *argv], stdout=subprocess.PIPE,
-                             stderr=subprocess.PIPE, text=True)  # fmt: skip
-    before = []
-    for line in child.stderr:
-        if line.strip() == "STAGE":
-            break
-        before.append(line)
+    child, before, _ = start_child(script, argv, "STAGE")
     t0 = time.perf_counter()
     err = child.stderr.read()  # the same buffered reader (communicate would skip its buffer)
     child.wait(timeout=60)
