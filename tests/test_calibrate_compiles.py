@@ -146,7 +146,8 @@ if sys.argv[1] == "second":
 sim = wi.simulate(wi.paper_record(), excitation="decay", observable="adc", rate_hz=200,
                   duration_s=3, noise_db=30, seed=1, tip_deflection_m=2e-3)
 obs = wi.Observation(sim.t, sim.signal(), excitation="decay", observable="adc", gain=None)
-print(wi.calibrate(wi.paper_record(), obs).params["f1_hz"]["value"])
+model = sys.argv[2] if len(sys.argv) > 2 else "linear"
+print(wi.calibrate(wi.paper_record(), obs, model=model).params["f1_hz"]["value"])
 """
 
 
@@ -163,6 +164,22 @@ def test_a_fresh_interpreter_loads_the_calibration_without_tracing_it(tmp_path):
     assert [o.returncode for o in out] == [0, 0], out[1].stderr[-2000:]
     assert out[0].stdout == out[1].stdout  # the same fit, from the program on disk
     assert list((tmp_path / "programs").glob("*.jaxexport"))
+
+
+@pytest.mark.slow
+def test_a_fresh_interpreter_loads_the_nonlinear_calibration_without_tracing_it(tmp_path):
+    """The nonlinear fit's programs (the solves, the reported values, the window fits) come
+    from the disk in a second interpreter: nothing is traced or exported again."""
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "WHISKERID_COMPILE_CACHE": str(tmp_path)}
+    env.pop("JAX_COMPILATION_CACHE_DIR", None)
+    argv = [[sys.executable, "-c", _FRESH, which, "nonlinear"] for which in ("first", "second")]
+    out = [subprocess.run(a, env=env, capture_output=True, text=True, timeout=600) for a in argv]
+    assert [o.returncode for o in out] == [0, 0], out[1].stderr[-2000:]
+    assert out[0].stdout == out[1].stdout
 
 
 _LIBRARY = r"""

@@ -44,7 +44,9 @@ from ._calibrate import (
 )
 from ._checks import check_fit, decay_rates, hac_covariance, no_smaller_than, residual_peak
 from ._checks import lag1 as lag1_autocorr
+from ._core import unflatten_numpy
 from ._decay import conversion_average
+from ._nl_core import reported_with_jacobian, solve_nonlinear
 from ._observation import CalibrationError
 from ._problem import FitProblem, recording_design
 from ._short_windows import short_window_points
@@ -265,42 +267,6 @@ def tip_per_sensor(whisker, x_m):
     return shape[1] / shape[0]
 
 
-def _flat_residuals(flat, problem):
-    return problem.residuals(problem.unflatten(flat))
-
-
-@eqx.filter_jit
-def _solve(problem, flat0, solver, max_steps):
-    return _lsq.least_squares(
-        _flat_residuals, flat0, problem, solver=_lsq.make_solver(solver), max_steps=max_steps
-    )
-
-
-@eqx.filter_jit
-def _residuals_and_jacobian(problem, flat):
-    return _flat_residuals(flat, problem), jax.jacfwd(_flat_residuals)(flat, problem)
-
-
-@eqx.filter_jit
-def _reported_with_jacobian(problem, flat, amplitudes):
-    def fn(f):
-        return jnp.stack(list(problem.reported(problem.unflatten(f), amplitudes).values()))
-
-    return fn(flat), jax.jacfwd(fn)(flat)
-
-
-@eqx.filter_jit
-def _reweighted(problem, params):
-    weights = []
-    for (D, g, _), r, p in zip(
-        problem.design(params), problem.base.recordings, params["recs"], strict=True
-    ):
-        res = D @ p["c"] + g - r.y
-        sigma = jnp.sqrt(jnp.sum(res**2) / max(res.size - D.shape[1], 1))
-        weights.append(1.0 / jnp.maximum(sigma, 1e-12))
-    return eqx.tree_at(lambda q: [r.weight for r in q.base.recordings], problem, weights)
-
-
 # --------------------------------------------------------------------------- results
 @dataclass
 class NonlinearCalibration(Calibration):
@@ -396,24 +362,24 @@ def calibrate_nonlinear(
         from ._nl_free_modes import free_higher_modes
 
         problem, theta0 = free_higher_modes(problem, theta0, obs)
-    res = _solve(problem, problem.flatten(theta0), solver, max_steps)
-    problem = _reweighted(problem, problem.unflatten(res.value))
-    res = _solve(problem, res.value, solver, max_steps)
-    resid_w, jac = (np.asarray(a) for a in _residuals_and_jacobian(problem, res.value))
-    bread = np.asarray(_lsq.scaled_inverse_gram(jac))
-    s2 = float(_lsq.residual_variance(resid_w, res.value.size))
-    cov_white = s2 * bread
-    gcos = float(_lsq.gradient_cosine_from(jac, resid_w))
+    # in NumPy (ravel_pytree's order): eager JAX would compile small programs in every run
+    flat0 = np.concatenate([np.ravel(np.asarray(x)) for x in jax.tree_util.tree_leaves(theta0)])
+    problem, core = solve_nonlinear(problem, flat0, solver=solver, max_steps=max_steps,
+                                    observed_per_metre=_observed_per_metre)  # fmt: skip
+    res = _lsq.FitResult(core["value"], core["ok"], core["steps"], core["cost"], core["resid"].size)
+    resid_w, jac = core["resid"], core["jac"]
+    s2, gcos = float(core["s2"]), float(core["gcos"])
+    cov_white = s2 * core["bread"]
     converged = bool(res.ok) or gcos < GTOL
     ok = converged and bool(np.all(np.isfinite(np.diag(cov_white))))
     status = "ok" if ok else ("non-finite" if not np.isfinite(float(res.cost)) else "not converged")
-    cov, lag = hac_covariance(_blocks(jac, resid_w, obs), bread)
+    cov, lag = hac_covariance(_blocks(jac, resid_w, obs), core["bread"])
     cov = no_smaller_than(cov, cov_white)
     uncertainty = (
         f"HAC (Newey-West, Bartlett weights to lag {lag}; never below the white-noise 1-sigma)"
     )
-    optimum = problem.unflatten(res.value)
-    per_rec, curves, envelopes = _per_recording(problem, optimum, obs)
+    optimum = unflatten_numpy(problem, res.value)
+    per_rec, curves, envelopes = _per_recording(problem, optimum, obs, core)
     grid = _amplitude_grid(envelopes, per_rec)
     params, corr, backbone = _report(problem, res.value, cov, cov_white, grid, linear)
     backbone["windows"] = short_window_points(obs, per_rec, float(params["f1_hz"]["value"]))
@@ -423,7 +389,7 @@ def calibrate_nonlinear(
         "a_ref_m": float(problem.a_ref),
         # RSS of the linear fit over the nonlinear one (normalised data, unweighted)
         "linear_rss_over_nonlinear": _rss_linear(linear)
-        / max(_rss_nonlinear(problem, optimum), 1e-300),
+        / max(_rss_nonlinear(problem, core), 1e-300),
     }
     warnings = _poor_fit_warnings(per_rec)
     checks: dict[str, str] = {}
@@ -458,13 +424,10 @@ def _rss_linear(cal: Calibration) -> float:
     return float(sum(np.sum(((np.asarray(m) - y) / np.std(y)) ** 2) for _, y, m in cal.curves))
 
 
-def _rss_nonlinear(problem, params) -> float:
-    out = 0.0
-    for (D, g, _), r, p in zip(
-        problem.design(params), problem.base.recordings, params["recs"], strict=True
-    ):
-        out += float(jnp.sum((D @ p["c"] + g - r.y) ** 2))
-    return out
+def _rss_nonlinear(problem, core) -> float:
+    """Unweighted normalised RSS of the nonlinear fit (the program's curves)."""
+    return float(sum(np.sum((core[f"model_{i}"] - np.asarray(r.y)) ** 2)
+                     for i, r in enumerate(problem.base.recordings)))  # fmt: skip
 
 
 def _note(linear_note: str, terms) -> str:
@@ -476,21 +439,18 @@ def _note(linear_note: str, terms) -> str:
     )
 
 
-def _per_recording(problem: NonlinearProblem, optimum, obs):
-    designs = problem.design(optimum)
+def _per_recording(problem: NonlinearProblem, optimum, obs, core):
     out, curves, envelopes = [], [], []
-    nm = problem.base.n_modes
-    for (D, g, a), rec, p, o in zip(designs, problem.base.recordings, optimum["recs"], obs,
-                                    strict=True):  # fmt: skip
+    for i, (rec, p, o) in enumerate(zip(problem.base.recordings, optimum["recs"], obs,
+                                        strict=True)):  # fmt: skip
         y_mean, y_std = float(np.mean(o.y)), float(np.std(o.y))
-        model = np.asarray(D @ p["c"] + g) * y_std + y_mean
+        model = core[f"model_{i}"] * y_std + y_mean
         r = o.y - model
         rms = float(np.sqrt(np.mean(r**2)))
-        w = problem.base.whisker(optimum)
-        obs_per_m = float(_observed_per_metre(rec, problem.mode(optimum), w))
+        obs_per_m = float(core[f"per_m_{i}"])
         c = np.asarray(p["c"])
-        modal = np.asarray(D)[:, 2 : 2 + 2 * nm] * c[2 : 2 + 2 * nm]
-        modal = modal[:, :nm] + modal[:, nm:]
+        modal = core[f"modal_{i}"]
+        a = core[f"env_{i}"]
         out.append(
             {
                 "name": o.name,
@@ -529,8 +489,8 @@ def _amplitude_grid(envelopes, per_rec) -> np.ndarray:
 
 
 def _report(problem, flat, cov, cov_white, grid, linear):
-    values, jac = (np.asarray(a) for a in _reported_with_jacobian(problem, flat, jnp.asarray(grid)))
-    names = list(problem.reported(problem.unflatten(flat), jnp.asarray(grid)))
+    values, jac = reported_with_jacobian(problem, flat, grid)
+    names = _reported_names(problem, flat, grid)
     dcov = jac @ cov @ jac.T
     std = np.sqrt(np.maximum(np.diag(dcov), 0.0))
     std_white = np.sqrt(np.maximum(np.diag(jac @ cov_white @ jac.T), 0.0))
@@ -555,6 +515,19 @@ def _report(problem, flat, cov, cov_white, grid, linear):
         "matrix": np.round(np.nan_to_num(corr), 6).tolist(),
     }
     return params, correlations, bb
+
+
+def _reported_names(problem, flat, grid) -> list[str]:
+    """The names of :meth:`NonlinearProblem.reported` in its order (traced for shapes only:
+    a dict returned through JAX comes back with its keys sorted)."""
+    names: list[str] = []
+
+    def fn(params, amplitudes):
+        names.extend(problem.reported(params, amplitudes))
+        return 0.0
+
+    jax.eval_shape(fn, unflatten_numpy(problem, flat), grid)
+    return names
 
 
 def _updated_record(cal: NonlinearCalibration):
