@@ -12,7 +12,16 @@ import numpy as np
 import pytest
 
 from whiskerid.fit import FitProblem, Observation
-from whiskerid.fit._start import F_DECAY, F_POINTS, start_grid, start_values
+from whiskerid.fit._start import (
+    F_DECAY,
+    F_FORCED,
+    F_POINTS,
+    Z_FORCED,
+    Z_POINTS,
+    _start_jit,
+    start_grid,
+    start_values,
+)
 from whiskerid.model import paper_record
 
 RATIO = 6.267  # f_2/f_1 of a cantilever without tip mass (4.6941²/1.8751²)
@@ -75,15 +84,19 @@ def test_the_spectrum_puts_a_candidate_on_f1_with_its_own_zeta(rate, f1, zeta):
     assert abs(grid["zeta1"][best, 0] / zeta - 1) < 0.35, (grid["zeta1"][best], zeta)
 
 
-def test_a_sine_keeps_the_full_grid():
-    """Without a free decay the spectrum does not say where f_1 is: 17 steps and more."""
+def test_a_sine_keeps_the_geometric_grid():
+    """Without a free decay the spectrum does not say where f_1 is: the 17 geometric steps,
+    with the record's five ζ in the second stage, in a grid of its own size."""
     t = np.arange(600) / 200.0
     y = 100 * np.sin(2 * np.pi * 40.0 * t) + np.random.default_rng(1).normal(0, 1, t.size)
     obs = Observation(t, y, excitation="sine", fb_hz=40.0, observable="deflection")
     nominal = paper_record()
     problem, whisker = _problem(obs, nominal)
     grid = start_grid(problem, [obs], whisker)
-    assert grid["f_hz"].shape == (F_POINTS,) and int(grid["f_valid"].sum()) >= 17
+    assert grid["f_hz"].shape == (F_FORCED,) and int(grid["f_valid"].sum()) == 17
+    assert grid["zeta"].shape == (Z_FORCED,) and int(grid["z_valid"].sum()) == 5
+    steps = grid["f_hz"][1:17] / grid["f_hz"][:16]
+    assert np.allclose(steps, 2.5 ** (2 / 16)) and np.isclose(np.prod(steps), 6.25)
 
 
 @pytest.mark.slow
@@ -97,3 +110,59 @@ def test_the_chosen_start_is_near_the_truth(rate, f1, zeta):
     w = problem.whisker(theta)
     assert abs(float(w.natural_frequencies_hz[0]) / f1 - 1) < 5e-3
     assert 0.5 < float(np.asarray(w.zeta)[0]) / zeta < 2.0
+
+
+def _sine_from_rest(rate_hz, f1_hz, zeta, fb_hz, duration_s, seed=0):
+    """Two modes driven by a sine from rest: each mode's steady state at ``fb_hz`` (its
+    complex amplitude ``1/(ω² − ω_b² + 2iζωω_b)``) plus the free decay that starts it from
+    zero deflection and velocity, 40 dB SNR; written in NumPy, not with the package's model."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(int(duration_s * rate_hz)) / rate_hz
+    wb = 2 * np.pi * fb_hz
+    y = np.zeros_like(t)
+    for f, a in ((f1_hz, 1.0), (RATIO * f1_hz, -0.3)):
+        w = 2 * np.pi * f
+        sigma, wd = zeta * w, w * np.sqrt(1 - zeta**2)
+        h = a * w**2 / (w**2 - wb**2 + 2j * zeta * w * wb)  # steady state of e^{iω_b t}
+        steady = np.imag(h * np.exp(1j * wb * t))
+        # homogeneous part e^{-σt}(c1 cos ω_d t + c2 sin ω_d t) cancelling x(0) and x'(0)
+        c1 = -np.imag(h)
+        c2 = -(np.real(h) * wb + sigma * c1) / wd
+        y += steady + np.exp(-sigma * t) * (c1 * np.cos(wd * t) + c2 * np.sin(wd * t))
+    y = 500.0 * y + 100.0
+    y += rng.normal(0.0, np.std(y) / 10 ** (40 / 20), t.size)
+    return Observation(t, y, excitation="sine", fb_hz=fb_hz, observable="deflection")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("rate", "f1", "zeta", "fb", "duration"),
+    # 1500 samples each: the second case runs the programs the first compiled
+    [(1000.0, 46.0, 0.04, 30.0, 1.5), (200.0, 71.0, 0.02, 40.0, 7.5)],
+)
+def test_a_sine_grid_sized_to_its_points_chooses_what_the_full_grid_chose(
+    rate, f1, zeta, fb, duration
+):
+    """No free decay: 17 f_1 steps × 2 ζ, then 4 × 5 ζ, in a grid of 24 × 2 and 4 × 8 (80
+    profiles), not the full one (48 × 2, then 4 × 12: the same points, more padding). Both
+    choose the same start, on a sine from rest written in NumPy, and it is the grid's best:
+    the step (12 % apart) nearest the truth's f_1, or its neighbour."""
+    obs = _sine_from_rest(rate, f1, zeta, fb, duration_s=duration)
+    nominal = _record(1.3 * f1)
+    problem, whisker = _problem(obs, nominal)
+    grid = start_grid(problem, [obs], whisker)
+    assert grid["f_hz"].shape == (F_FORCED,) and grid["zeta"].shape == (Z_FORCED,)
+    full = dict(grid)  # the grid as it was: the same points, padded further
+    for key, n in (("f_hz", F_POINTS), ("log_kappa", F_POINTS), ("zeta", Z_POINTS)):
+        full[key] = np.pad(grid[key], (0, n - grid[key].size), mode="edge")
+    full["zeta1"] = np.pad(grid["zeta1"], ((0, F_POINTS - F_FORCED), (0, 0)), mode="edge")
+    full["f_valid"] = np.pad(grid["f_valid"], (0, F_POINTS - F_FORCED))
+    full["z_valid"] = np.pad(grid["z_valid"], (0, Z_POINTS - Z_FORCED))
+    new, old = (_start_jit(problem, {k: np.asarray(v) for k, v in g.items()}) for g in (grid, full))
+    for key in ("log_kappa", "zeta_u"):
+        assert np.allclose(np.asarray(new[key]), np.asarray(old[key]), rtol=0, atol=1e-12)
+    f_start = float(problem.whisker(new).natural_frequencies_hz[0])
+    # At 200 Hz mode 1's transient at 71 Hz and at its alias 129 Hz give the same samples
+    # (only the weak mode 2 differs), and a sine has no Nyquist preference: either may win.
+    lines = [f1] if rate / 2 > 2.5 * 1.3 * f1 else [f1, rate - f1]
+    assert min(abs(np.log(f_start / f)) for f in lines) < 1.5 * np.log(2.5) / 16, (f_start, f1)

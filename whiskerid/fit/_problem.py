@@ -418,7 +418,11 @@ def _forced_sine(w, rec, t, tau):
 
 
 def _rms(x):
-    return jax.lax.stop_gradient(jnp.sqrt(jnp.mean(x**2)) + 1e-300)
+    """RMS of a free column, with its derivative: a column ``c(θ)/rms(c(θ))`` no longer scales
+    with the response's amplitude, and a Jacobian that missed this (the RMS held fixed) left
+    sine fits crawling for hundreds of solver steps without converging, their values still
+    moving with the step limit."""
+    return jnp.sqrt(jnp.mean(x**2) + 1e-300)
 
 
 def recording_design(rec: RecordingModel, w: Whisker, rec_params: dict, *, profile=False):

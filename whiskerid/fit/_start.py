@@ -94,6 +94,14 @@ F_DECAY = 8
 Z_DECAY = 4
 #: f_1 candidates of a free-decay grid whose ζ is searched in the second stage.
 REFINED_DECAY = 2
+#: The same sizes when no recording is a free decay (a sine, base motion): no spectral
+#: peak nor envelope adds a candidate, so the grid holds the 17 geometric steps and the
+#: record's five ζ (sized :data:`F_POINTS` and :data:`Z_POINTS`, 62 of the first stage's 96
+#: profiles and 28 of the second's 48 were padding, computed and never chosen). Both stages
+#: stay whole batches of :data:`_GRID_BATCH` (2·24 and 4·8): a remainder, or a batch of
+#: another size, is compiled as a program of its own, which cost more than it saved.
+F_FORCED = 24
+Z_FORCED = 8
 #: f_1 candidates (the best of the first stage) whose ζ is searched in the second.
 _REFINED = 4
 #: Grid points profiled at once (vectorised) inside the sequential map over the grid.
@@ -136,7 +144,9 @@ def start_grid(
     frequency, then the best
     :data:`REFINED_DECAY` with :data:`Z_DECAY` ζ): 16 profiles instead of 144, which were
     most of a warm calibration's time. Its free slots (fewer peaks than slots) hold steps
-    of 25 % about the nominal f_1.
+    of 25 % about the nominal f_1. When no recording is a free decay, the grid is sized to
+    the 17 steps and five ζ (:data:`F_FORCED`, :data:`Z_FORCED`): 80 profiles instead of
+    144, the same points and the same choice (the rest is padding either way).
 
     Returns:
         ``f_hz`` and ``log_kappa`` of each f_1 candidate and ``f_valid`` (0 for padding);
@@ -170,7 +180,7 @@ def start_grid(
         zeta1 = [[zeta_nom, zeta_env]] * min(len(f_cands), F_POINTS)
         # The record's five ζ, then the envelopes' in order.
         z_cands = [zeta_nom * k for k in (0.25, 0.5, 1.0, 2.0, 4.0)] + envelopes
-        nf, nz = F_POINTS, Z_POINTS
+        nf, nz = (F_POINTS, Z_POINTS) if spectral or envelopes else (F_FORCED, Z_FORCED)
     z_cands = np.clip(np.unique(np.round(z_cands[:nz], 6)), 1e-4, 0.5)
     f_cands = np.asarray(f_cands)[:nf]
     pad_f, pad_z = nf - f_cands.size, nz - z_cands.size
