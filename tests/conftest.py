@@ -14,7 +14,10 @@ compiles it saves weigh more (the slow checks took 416 s with it against 456 s w
 JAX's persistent compilation cache points at a folder made for this run (removed at its end):
 a test after compiled code was freed loads what an earlier test compiled instead of
 compiling it again, and with ``pytest -n 2`` (pytest-xdist) one worker loads what the other
-compiled. Nothing is kept between runs, so every run is a cold start.
+compiled. Nothing is kept between runs, so every run is a cold start, unless
+``WHISKERID_TEST_JAX_CACHE`` names a folder: the run then uses it and leaves it in place
+(``.ci/run`` gives its default and slow runs one folder, so that the slow checks load what the
+default run compiled).
 """
 
 import ctypes
@@ -28,10 +31,12 @@ import pytest
 
 jax.config.update("jax_enable_x64", True)
 
-# Made once by the main pytest process; xdist's workers inherit it through the environment.
-_CACHE = os.environ.get("WHISKERID_TEST_JAX_CACHE") or tempfile.mkdtemp(
-    prefix="whiskerid-test-jax-cache-"
-)
+# Made once by the main pytest process; xdist's workers inherit it through the environment
+# (and the marker that this run made it, so that only then is it removed at the end).
+_GIVEN = os.environ.get("WHISKERID_TEST_JAX_CACHE")
+_CACHE = _GIVEN or tempfile.mkdtemp(prefix="whiskerid-test-jax-cache-")
+if not _GIVEN:
+    os.environ["WHISKERID_TEST_JAX_CACHE_MADE"] = _CACHE
 os.environ["WHISKERID_TEST_JAX_CACHE"] = _CACHE
 # Commands run as subprocesses use it too, instead of the user's cache folder.
 os.environ["WHISKERID_COMPILE_CACHE"] = _CACHE
@@ -53,8 +58,10 @@ def pytest_configure(config):
 
 
 def pytest_sessionfinish(session, exitstatus):
-    """Remove this run's compilation cache (the main process, after its workers)."""
-    if os.environ.get("PYTEST_XDIST_WORKER") is None:
+    """Remove the compilation cache this run made (the main process, after its workers); a
+    folder given in ``WHISKERID_TEST_JAX_CACHE`` is left to whoever gave it."""
+    made = os.environ.get("WHISKERID_TEST_JAX_CACHE_MADE") == _CACHE
+    if os.environ.get("PYTEST_XDIST_WORKER") is None and made:
         shutil.rmtree(_CACHE, ignore_errors=True)
 
 
