@@ -28,6 +28,8 @@ of the scaled Jacobian, ``λ`` adapted by the ratio ``ρ`` of actual to predicte
 reduction of ``‖r‖²``, scaled step, gradient cosine), with tolerances far below any 1σ.
 """
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -97,10 +99,10 @@ def least_squares(problem: FitProblem, masks, flat0, *, max_steps: int):
     """
     fn, nl_idx, lin_idx = projection(problem, masks, flat0.size)
 
-    def jac(phi):  # (J, r): the residuals come with the Jacobian's primal pass
+    def jac(phi):  # (J, (r, cs)): the residuals and coefficients from the primal pass
         def both(p):
-            r = fn(p)[0]
-            return r, r
+            r, cs = fn(p)
+            return r, (r, cs)
 
         return jax.jacfwd(both, has_aux=True)(phi)
 
@@ -111,59 +113,70 @@ def least_squares(problem: FitProblem, masks, flat0, *, max_steps: int):
     def factor(J, diag):  # the SVD of the scaled Jacobian serves every λ at this point
         return jnp.linalg.svd(J / diag, full_matrices=False)
 
+    # The start is the loop's first pass (no step, always taken), so that the projection
+    # and its Jacobian are traced and compiled once, not once more for the start.
     phi0 = flat0[nl_idx]
-    J0, r0 = jac(phi0)
-    cost0 = r0 @ r0
-    diag0 = jnp.where(jnp.linalg.norm(J0, axis=0) > 0, jnp.linalg.norm(J0, axis=0), 1.0)
-    done0 = (gcos(J0, r0) <= GTOL) | ~jnp.isfinite(cost0)
+    J0, (r0, cs0) = jax.eval_shape(jac, phi0)
+    zeros = functools.partial(jax.tree_util.tree_map, lambda x: jnp.zeros(x.shape, x.dtype))
+    J0, r0, cs0 = zeros(J0), zeros(r0), zeros(cs0)
     state = dict(
-        phi=phi0, r=r0, J=J0, svd=factor(J0, diag0), cost=cost0, lam=jnp.asarray(1e-3),
-        nu=jnp.asarray(2.0), diag=diag0, steps=jnp.asarray(0), done=done0,
-        ok=done0 & jnp.isfinite(cost0),
+        phi=phi0, r=r0, J=J0, cs=cs0, svd=factor(J0, jnp.ones(phi0.shape)), cost=jnp.inf,
+        lam=jnp.asarray(1e-3), nu=jnp.asarray(2.0), diag=jnp.ones(phi0.shape),
+        steps=jnp.asarray(0), first=jnp.asarray(True), done=jnp.asarray(False),
+        ok=jnp.asarray(False),
     )  # fmt: skip
 
     def body(st):
+        first = st["first"]
         u, s, vt = st["svd"]
         ur = u.T @ st["r"]
         scaled = -vt.T @ (s / (s**2 + st["lam"]) * ur)  # D·δ, the damped scaled step
+        scaled = jnp.where(first, 0.0, scaled)
         step = scaled / st["diag"]
         linear = st["r"] + (st["J"] / st["diag"]) @ scaled
         predicted = st["cost"] - linear @ linear
         phi_new = st["phi"] + step
         # the trial point's Jacobian with its residuals: one pass, and a step is rarely
         # rejected (an evaluation, then the Jacobian again on acceptance, cost ~20 % more)
-        J_new, r_new = jac(phi_new)
+        J_new, (r_new, cs_new) = jac(phi_new)
         cost_new = jnp.where(jnp.all(jnp.isfinite(r_new)), r_new @ r_new, jnp.inf)
         actual = st["cost"] - cost_new
         rho = jnp.where(predicted > 0, actual / jnp.where(predicted > 0, predicted, 1.0), -1.0)
         small_step = jnp.linalg.norm(scaled) <= XTOL * jnp.linalg.norm(st["diag"] * st["phi"])
-        accept = rho > _ACCEPT
+        accept = first | (rho > _ACCEPT)
         ftol = FTOL * st["cost"]
         small_cost = (actual <= ftol) & (predicted <= ftol) & (rho <= 2)
 
         def accepted(_):
-            diag = jnp.maximum(st["diag"], jnp.linalg.norm(J_new, axis=0))
-            return phi_new, r_new, J_new, factor(J_new, diag), diag, gcos(J_new, r_new) <= GTOL
+            norms = jnp.linalg.norm(J_new, axis=0)
+            diag = jnp.where(first, jnp.where(norms > 0, norms, 1.0),
+                             jnp.maximum(st["diag"], norms))  # fmt: skip
+            gtest = gcos(J_new, r_new) <= GTOL
+            return phi_new, r_new, J_new, cs_new, factor(J_new, diag), diag, gtest
 
         def rejected(_):
-            return st["phi"], st["r"], st["J"], st["svd"], st["diag"], jnp.asarray(False)
+            return (st["phi"], st["r"], st["J"], st["cs"], st["svd"], st["diag"],
+                    jnp.asarray(False))  # fmt: skip
 
-        phi, r, J, svd, diag, gtest = jax.lax.cond(accept, accepted, rejected, None)
-        converged = jnp.where(accept, small_step | small_cost | gtest, small_step)
-        steps = st["steps"] + 1
+        phi, r, J, cs, svd, diag, gtest = jax.lax.cond(accept, accepted, rejected, None)
+        converged = jnp.where(
+            first, gtest, jnp.where(accept, small_step | small_cost | gtest, small_step)
+        )
+        steps = st["steps"] + jnp.where(first, 0, 1)
+        cost = jnp.where(accept, cost_new, st["cost"])
+        grow = jnp.where(first, 1.0, st["nu"])
         return dict(
-            phi=phi, r=r, J=J, svd=svd, diag=diag, steps=steps,
-            cost=jnp.where(accept, cost_new, st["cost"]),
-            lam=jnp.where(accept, st["lam"] * jnp.maximum(1 / 3, 1 - (2 * rho - 1) ** 3),
-                          st["lam"] * st["nu"]),
-            nu=jnp.where(accept, 2.0, 2.0 * st["nu"]),
-            done=converged | (steps >= max_steps) | ~jnp.isfinite(st["cost"]),
-            ok=converged & jnp.isfinite(st["cost"]),
+            phi=phi, r=r, J=J, cs=cs, svd=svd, diag=diag, steps=steps, cost=cost,
+            lam=jnp.where(accept & ~first,
+                          st["lam"] * jnp.maximum(1 / 3, 1 - (2 * rho - 1) ** 3),
+                          st["lam"] * grow),
+            nu=jnp.where(accept, 2.0, 2.0 * st["nu"]), first=jnp.asarray(False),
+            done=converged | (steps >= max_steps) | ~jnp.isfinite(cost),
+            ok=converged & jnp.isfinite(cost),
         )  # fmt: skip
 
     st = jax.lax.while_loop(lambda st: ~st["done"], body, state)
-    _, cs = fn(st["phi"])
     flat = jnp.zeros_like(flat0).at[nl_idx].set(st["phi"])
-    for idx, c in zip(lin_idx, cs, strict=True):
+    for idx, c in zip(lin_idx, st["cs"], strict=True):
         flat = flat.at[idx].set(c)
     return flat, st["ok"], st["steps"]
