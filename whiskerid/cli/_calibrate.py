@@ -55,7 +55,8 @@ def add_calibrate(sub, command_error) -> None:
         "--solver",
         choices=SOLVERS,
         default="levenberg-marquardt",
-        help="least-squares solver (optimistix)",
+        help="least-squares solver (Levenberg-Marquardt by variable projection; dogleg and "
+        "gauss-newton: optimistix over every parameter)",
     )
     p.add_argument(
         "--model",

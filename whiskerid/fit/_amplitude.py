@@ -40,6 +40,7 @@ from ._model_error import apply_model_error, model_error
 from ._noise_floor import check_noise_floor
 from ._nonlinear import tip_per_sensor
 from ._problem import ZETA_MAX, residuals_and_jacobian
+from ._projector import LinearPart
 
 #: False-alarm probability of each test on a linear whisker.
 P_FALSE = 1e-4
@@ -88,15 +89,17 @@ def amplitude_test(cal, *, resid=None, jac=None, core=None) -> dict:
     r, jac = np.asarray(resid), np.asarray(jac)
     cols, info = _columns(problem, opt, core if core is not None else _whisker_terms(problem, opt))
     out = {}
+    lin = LinearPart(jac)  # factored once for the two tests and the model-error subsets
     for name in ("nonlinear", "split"):
         z = np.concatenate([c[name] for c in cols], axis=0)
-        step = _gauss_newton(jac, r, z)
+        zp = lin.project(z)
         # the score's variance from the residuals the alternative leaves (a Wald-type
         # estimate): a misfit the nonlinear terms explain does not widen its own yardstick
-        r_alt = r + np.concatenate([jac, z], axis=1) @ step
-        out[name] = _score(jac, r, r_alt, z, [c["n"] for c in cols])
-        out[name]["step"] = step[-z.shape[1] :].tolist()
-        out[name]["linear_step"] = unflatten_numpy(problem, step[: jac.shape[1]])
+        d_j, d_z, r_alt = lin.gauss_newton(r, z, zp)
+        out[name] = _score(zp, r, r_alt, [c["n"] for c in cols])
+        out[name]["step"] = d_z.tolist()
+        out[name]["linear_step"] = unflatten_numpy(problem, d_j)
+        out[name]["r_alt"] = r_alt
     found = {k: _found(cal, opt, out, info, k) for k in ("nonlinear", "split")}
     for k, (zetas, freqs, _) in found.items():
         out[k]["rel_change_zeta"] = abs(zetas[1] - zetas[0]) / max(abs(zetas[0]), 1e-12)
@@ -117,9 +120,14 @@ def amplitude_test(cal, *, resid=None, jac=None, core=None) -> dict:
     out["rejects"] = bool(rejecting)
     best = min(rejecting, key=lambda k: out[k]["p_value"]) if rejecting else None
     out["message"] = found[best][2] if best else ""
+    # the model-error term's subset of all three columns is the nonlinear test itself
+    known = {
+        tuple(range(len(NONLINEAR))): (out["nonlinear"]["statistic"], out["nonlinear"]["r_alt"])
+    }
     for k in ("nonlinear", "split"):
         out[k].pop("linear_step")
-    out["model_error"] = model_error(cal, jac, r, cols)
+        out[k].pop("r_alt")
+    out["model_error"] = model_error(cal, jac, r, cols, lin=lin, known=known)
     return out
 
 
@@ -195,14 +203,6 @@ def _columns(problem, opt, terms):
     return out, info
 
 
-def _project(jac, z):
-    """``Z`` minus its least-squares fit by the columns of ``J`` (column-scaled)."""
-    scale = np.linalg.norm(jac, axis=0)
-    scale = np.where(scale > 0, scale, 1.0)
-    coef, *_ = np.linalg.lstsq(jac / scale, z, rcond=None)
-    return z - (jac / scale) @ coef
-
-
 def test_lag(r: np.ndarray) -> int:
     """Lag after which the residuals' autocorrelation stays below what white noise reaches.
 
@@ -239,8 +239,9 @@ def score_meat(blocks) -> tuple[np.ndarray, int]:
     return meat, most
 
 
-def _score(jac, r, r_alt, z, sizes):
-    zp = _project(jac, z)
+def _score(zp, r, r_alt, sizes):
+    """The score statistic of the columns ``zp`` (already projected off ``J``: see
+    :class:`._projector.LinearPart`) at residuals ``r``, its HAC variance from ``r_alt``."""
     scale = np.linalg.norm(zp, axis=0)
     scale = np.where(scale > 0, scale, 1.0)
     zp = zp / scale
@@ -257,18 +258,8 @@ def _score(jac, r, r_alt, z, sizes):
     v = corr * np.sqrt(np.outer(v, v))
     s = zp.T @ r
     stat = float(s @ np.linalg.solve(v, s))
-    k = z.shape[1]
+    k = zp.shape[1]
     return {"statistic": stat, "dof": k, "p_value": chi2_sf(stat, k), "hac_lag": lag}
-
-
-def _gauss_newton(jac, r, z):
-    """One Gauss–Newton step along ``[J, Z]`` from the linear optimum (minimising
-    ``|r + [J, Z]δ|²``)."""
-    a = np.concatenate([jac, z], axis=1)
-    scale = np.linalg.norm(a, axis=0)
-    scale = np.where(scale > 0, scale, 1.0)
-    step, *_ = np.linalg.lstsq(a / scale, -r, rcond=None)
-    return step / scale
 
 
 def _found(cal, opt, out, info, test: str):

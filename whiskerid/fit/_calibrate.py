@@ -21,7 +21,9 @@ The model (:class:`whiskerid.fit.FitProblem`, module ``_problem``) is linear in 
 nuisances, ``y = D(θ) c + g(θ)``. Start values come from the data (module ``_start``: a
 grid over ``(κ, ζ)`` seeded by the spectral peaks and the envelope's logarithmic decay, with
 the linear coefficients solved exactly at every grid point); the best point starts a
-Levenberg–Marquardt fit of all parameters (optimistix, ``throw=False``, a status per fit).
+Levenberg–Marquardt fit by variable projection (module ``_varpro``: the linear coefficients
+solved at every point; optimistix's dogleg or Gauss–Newton over all parameters on request),
+with a status per fit.
 The covariance is ``s²(JᵀJ)⁻¹`` at the optimum (through the SVD of the column-scaled
 Jacobian, see :func:`whiskerid.fit.covariance`); with several recordings (or a static test)
 each block is weighted by its own residual scale from a first pass. When the residuals are

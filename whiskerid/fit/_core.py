@@ -2,7 +2,9 @@
 
 From the start grid to the covariance, everything a calibration computes with JAX is one
 traced function (:func:`fit_core`): the profile cost over the start grid and the best point
-(module ``_start``), the least squares (optimistix), the weight of each block (recording,
+(module ``_start``), the least squares (Levenberg–Marquardt over the nonlinear parameters
+with the linear coefficients solved at every point, module ``_varpro``; optimistix for the
+other solvers), the weight of each block (recording,
 static test) from its own residual scale and, with more than one block, the second solve,
 the residuals and Jacobian at the optimum, ``(JᵀJ)⁻¹`` through the SVD, ``s²``, MINPACK's
 gradient test, each recording's fitted curve and modal parts, and the reported quantities
@@ -28,12 +30,14 @@ import numpy as np
 
 from ..model import mode_shape
 from . import _lsq as _lsq
+from . import _varpro as _varpro
 from ._aot import cached_call
 from ._problem import FitProblem, recording_design
 from ._start import start_from_grid, start_grid
 
 _BUCKET_STEPS = (1.0, 1.25, 1.5, 1.75)
-#: The solver's tolerances (steps below ``atol + rtol·|θ|`` in every parameter). Tighter ones
+#: The optimistix solvers' tolerances (steps below ``atol + rtol·|θ|`` in every parameter;
+#: Levenberg–Marquardt has MINPACK's tests instead, module ``_varpro``). Tighter ones
 #: only add steps at rounding level (a 2000-sample pluck: 10 steps at 1e-8, 13 to 24 at
 #: 1e-10, to the same optimum within 1e-16); 1e-8 of f_1 is far below its 1σ.
 RTOL, ATOL = 1e-8, 1e-10
@@ -250,12 +254,18 @@ def fit_core(problem: FitProblem, masks, first: dict, *, solver: str, max_steps:
 
     def one_pass(carry, _):
         flat, weights = carry
-        res = _lsq.least_squares(
-            _masked_residuals, flat, (_weighted(problem, weights), mask), solver=lsq,
-            max_steps=max_steps,
-        )  # fmt: skip
-        new = _block_weights(problem, problem.unflatten(res.value), masks)
-        return (res.value, new), (res.ok, res.steps)
+        if solver == "levenberg-marquardt":  # over the nonlinear parameters only
+            value, ok, steps = _varpro.least_squares(
+                _weighted(problem, weights), masks, flat, max_steps=max_steps
+            )
+        else:
+            res = _lsq.least_squares(
+                _masked_residuals, flat, (_weighted(problem, weights), mask), solver=lsq,
+                max_steps=max_steps,
+            )  # fmt: skip
+            value, ok, steps = res.value, res.ok, res.steps
+        new = _block_weights(problem, problem.unflatten(value), masks)
+        return (value, new), (ok, steps)
 
     ones = jnp.ones(len(problem.recordings))
     (flat, weights), (ok, steps) = jax.lax.scan(

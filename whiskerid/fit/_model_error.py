@@ -36,47 +36,57 @@ import numpy as np
 
 from ._core import unflatten_numpy
 from ._problem import ZETA_MAX
+from ._projector import LinearPart, pinv_columns
 
 
-def _subset_statistics(jac, r, zs, sizes):
+def _subset_statistics(lin, r, zs, sizes, known=None):
     """``{subset: (T_S, residuals after the Gauss–Newton step with S)}`` over every
-    non-empty subset of the columns of ``zs``."""
-    from ._amplitude import _gauss_newton, _score
+    non-empty subset of the columns of ``zs`` (``known``: subsets already computed)."""
+    from ._amplitude import _score
 
-    out = {}
+    out = dict(known or {})
+    zp_all = lin.project(zs)  # column by column, so each subset's Z⊥ is its columns of it
     for mask in range(1, 2 ** zs.shape[1]):
         idx = tuple(j for j in range(zs.shape[1]) if mask >> j & 1)
-        z = zs[:, idx]
-        step = _gauss_newton(jac, r, z)
-        r_alt = r + np.concatenate([jac, z], axis=1) @ step
-        out[idx] = (_score(jac, r, r_alt, z, sizes)["statistic"], r_alt)
+        if idx in out:
+            continue
+        z, zp = zs[:, idx], zp_all[:, idx]
+        _, _, r_alt = lin.gauss_newton(r, z, zp)
+        out[idx] = (_score(zp, r, r_alt, sizes)["statistic"], r_alt)
     return out
 
 
-def step_map(jac, z, idx) -> np.ndarray:
+def step_map(jac, z, idx, lin=None) -> np.ndarray:
     """``X`` with ``Xᵀr`` the least-squares step of parameters ``idx`` along ``[J, Z]``
-    from residuals ``r`` (minimising ``|r + [J, Z]δ|²``): ``−(A⁺)ᵀ`` restricted to ``idx``,
-    ``A⁺ = R⁺Qᵀ`` of the column-scaled ``A = [J, Z]``. At the optimum of ``J`` alone
-    (``Jᵀr = 0``) that step is the difference of the two models' estimates; ``X`` is taken
-    off ``J``'s columns, so that ``σ²XᵀX`` is its variance."""
-    a = np.concatenate([jac, z], axis=1)
-    scale = np.linalg.norm(a, axis=0)
-    scale = np.where(scale > 0, scale, 1.0)
-    q, rr = np.linalg.qr(a / scale)
-    x = -(q @ np.linalg.pinv(rr).T[:, idx]) / scale[idx]
-    # off J's columns: the same step from any residual orthogonal to them, and
-    # Var(Xᵀr) = σ²XᵀX, the difference of the two fits' variances (Hausman)
-    coef, *_ = np.linalg.lstsq(jac / scale[: jac.shape[1]], x, rcond=None)
-    return x - (jac / scale[: jac.shape[1]]) @ coef
+    from residuals ``r`` (minimising ``|r + [J, Z]δ|²``), taken off ``J``'s columns.
+
+    The step is ``δ_J = −J⁺(r + Zδ_Z)`` with ``δ_Z = −Z⊥⁺r`` (see
+    :class:`._projector.LinearPart`). Off ``J``'s columns (``J⁺r = 0`` for any ``r``
+    orthogonal to them), ``δ_J = B Z⊥⁺ r`` with ``B = J⁺Z``, the regression of ``Z`` on
+    ``J``: ``X = (Z⊥⁺)ᵀ B[idx]ᵀ``. At the optimum of ``J`` alone (``Jᵀr = 0``) that step is
+    the difference of the two models' estimates, and ``σ²XᵀX`` is its variance (Hausman).
+
+    Args:
+        jac: ``J`` (``n × p``).
+        z: ``Z`` (``n × k``).
+        idx: Positions among ``J``'s parameters.
+        lin: ``LinearPart(jac)``, when already factored.
+    """
+    lin = LinearPart(jac) if lin is None else lin
+    b = lin.solve(z)
+    return pinv_columns(lin.project(z)).T @ b[idx].T
 
 
-def model_error(cal, jac, r, cols) -> dict:
+def model_error(cal, jac, r, cols, *, lin=None, known=None) -> dict:
     """Whether BIC prefers the nonlinear model, and the linear fit's averaging bias.
 
     Args:
         cal: The linear calibration.
         jac, r: Its weighted Jacobian and residuals at the optimum.
         cols: The amplitude test's columns per recording (``_amplitude._columns``).
+        lin: ``LinearPart(jac)``, when already factored.
+        known: Subsets whose statistic and residuals are already known (the amplitude
+            test's own: all three columns).
 
     Returns:
         ``preferred`` (bool), ``terms`` (the subset chosen), ``ln_n``, ``bic_gain``
@@ -88,7 +98,8 @@ def model_error(cal, jac, r, cols) -> dict:
     zs = np.concatenate([c["nonlinear"] for c in cols], axis=0)
     sizes = [c["n"] for c in cols]
     ln_n = float(np.log(sum(sizes)))
-    stats = _subset_statistics(jac, r, zs, sizes)
+    lin = LinearPart(jac) if lin is None else lin
+    stats = _subset_statistics(lin, r, zs, sizes, known)
     best = max(stats, key=lambda s: stats[s][0] - len(s) * ln_n)
     gain = float(stats[best][0] - len(best) * ln_n)
     out = {"preferred": bool(gain > 0), "terms": [NONLINEAR[j] for j in best],
@@ -96,7 +107,7 @@ def model_error(cal, jac, r, cols) -> dict:
     z = zs[:, list(best)]
     where = unflatten_numpy(cal.problem, np.arange(jac.shape[1], dtype=float))
     idx = [int(np.ravel(where["log_kappa"])[0]), int(np.ravel(where["zeta_u"])[0])]
-    x = step_map(jac, z, idx)
+    x = step_map(jac, z, idx, lin)
     delta = x.T @ r
     r_alt = stats[best][1]
     blocks, start = [], 0

@@ -1,0 +1,70 @@
+"""The linear fit's Jacobian, factored once for every score test that projects on it.
+
+The amplitude tests (module ``_amplitude``) and the model-error term (module
+``_model_error``) ask nine times, with different extra columns ``Z``, the same questions of
+one Jacobian ``J`` at the linear optimum: ``Z`` less its fit by ``J``'s columns (``Z⊥``), and
+the Gauss–Newton step along ``[J, Z]`` that minimises ``‖r + Jδ_J + Zδ_Z‖²`` with the
+residuals it leaves. Each was a least-squares solve of ``n × (p + k)``. With ``J``'s SVD
+(columns scaled to unit norm, singular values below ``max(n, p)·ε`` of the largest left out,
+as :func:`numpy.linalg.lstsq` leaves them out) taken once, the step splits exactly into two
+small solves, because ``[J, Z]`` spans what ``J`` and ``Z⊥`` span:
+
+* ``δ_Z = −Z⊥⁺ r`` (``Z⊥`` is orthogonal to ``J``, so ``J`` cannot absorb any of it);
+* ``δ_J = −J⁺ (r + Z δ_Z)``;
+* the residuals left, ``r + Jδ_J + Zδ_Z = (I − P_J) r + Z⊥ δ_Z``.
+"""
+
+import numpy as np
+
+
+class LinearPart:
+    """``J`` (``n × p``) factored once (see the module docstring).
+
+    Attributes:
+        u: Left singular vectors of the column-scaled ``J`` that are kept (``n × rank``).
+    """
+
+    def __init__(self, jac: np.ndarray):
+        jac = np.asarray(jac)
+        scale = np.linalg.norm(jac, axis=0)
+        self._scale = np.where(scale > 0, scale, 1.0)
+        u, s, vt = np.linalg.svd(jac / self._scale, full_matrices=False)
+        keep = s > (s[0] if s.size else 0.0) * max(jac.shape) * np.finfo(float).eps
+        self.u = u[:, keep]
+        self._vs = vt[keep].T / s[keep]  # J⁺ = diag(1/scale) V S⁻¹ Uᵀ
+
+    def project(self, z: np.ndarray) -> np.ndarray:
+        """``Z⊥``: ``z`` less its least-squares fit by ``J``'s columns."""
+        return z - self.u @ (self.u.T @ z)
+
+    def solve(self, y: np.ndarray) -> np.ndarray:
+        """``J⁺ y``: the least-squares coefficients of ``y`` on ``J``'s columns."""
+        out = self._vs @ (self.u.T @ y)
+        return out / self._scale.reshape((-1,) + (1,) * (out.ndim - 1))
+
+    def gauss_newton(self, r: np.ndarray, z: np.ndarray, zp: np.ndarray | None = None):
+        """The step along ``[J, Z]`` from residuals ``r`` and the residuals it leaves.
+
+        Args:
+            r: Residuals ``(n,)``.
+            z: Extra columns ``(n, k)``.
+            zp: ``project(z)``, when already computed.
+
+        Returns:
+            ``(δ_J, δ_Z, r_alt)``.
+        """
+        zp = self.project(z) if zp is None else zp
+        d_z = -pinv_columns(zp) @ r
+        d_j = -self.solve(r + z @ d_z)
+        r_alt = r - self.u @ (self.u.T @ r) + zp @ d_z
+        return d_j, d_z, r_alt
+
+
+def pinv_columns(a: np.ndarray) -> np.ndarray:
+    """``A⁺`` of a tall ``A`` (``k × n``) through its column-scaled SVD, with
+    :func:`numpy.linalg.lstsq`'s cut of small singular values."""
+    scale = np.linalg.norm(a, axis=0)
+    scale = np.where(scale > 0, scale, 1.0)
+    u, s, vt = np.linalg.svd(a / scale, full_matrices=False)
+    keep = s > (s[0] if s.size else 0.0) * max(a.shape) * np.finfo(float).eps
+    return (vt[keep].T / s[keep] @ u[:, keep].T) / scale[:, None]
