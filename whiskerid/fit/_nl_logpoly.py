@@ -21,8 +21,7 @@ as their tangents in ``ln a``, at most two factors ``e`` below ``a_lo`` and one 
 
 A polynomial and not a natural cubic spline: natural end conditions force zero curvature in
 ``ln a`` at both ends of the range, where a power law ``a^p`` (a joint's micro-slip) bends
-most; on a SciPy pluck with a ``|u|^1.5`` stiffness a natural spline's ``f(a)`` missed the
-exact backbone by 4.3σ near the largest amplitude.
+most.
 
 **How many knots.** Each extra knot adds two parameters. The fits for ``K = 2 …`` are
 compared by the Bayesian information criterion in its likelihood-ratio form,
