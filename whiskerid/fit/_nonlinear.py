@@ -309,7 +309,9 @@ def calibrate_nonlinear(
         knots: 0 for the parametric backbone (``terms``); ``K ≥ 2`` for ``f(a)``, ``ζ(a)``
             as polynomials in ``ln a`` through ``K`` knots (:mod:`._nl_logpoly`; ``terms``
             ignored; ``f1_hz`` and ``zeta`` are then the values at the smallest informed
-            amplitude ``diagnostics["a_lo_m"]``, not ``a → 0``).
+            amplitude ``diagnostics["a_lo_m"]``, not ``a → 0``). A study tool: on SciPy
+            plucks its ``f(a)`` is right within its 1σ, its ``ζ(a)`` under velocity-squared
+            damping is not (pulls to 6).
 
     Returns:
         A :class:`NonlinearCalibration`; never raises on a failed solve (see ``status``).
