@@ -125,6 +125,7 @@ def free_higher_modes(problem: NonlinearProblem, theta0: dict, obs) -> tuple:
     best = None
     for m in ZETA_STARTS:
         fp = FreeModesProblem(base=problem.base, a_ref=problem.a_ref, terms=problem.terms,
+                              n_knots=problem.n_knots, ln_a_lo=problem.ln_a_lo,
                               f_start=f0, zeta_start=jnp.asarray(zeta * m))  # fmt: skip
         start = _project(fp, {**theta0, "hm": jnp.zeros(2 * (nm - 1))})
         cost = float(jnp.sum(fp.residuals(start) ** 2))

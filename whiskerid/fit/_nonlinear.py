@@ -47,6 +47,9 @@ from ._checks import lag1 as lag1_autocorr
 from ._core import unflatten_numpy
 from ._decay import conversion_average
 from ._nl_core import reported_with_jacobian, solve_nonlinear
+from ._nl_friction import _friction_offset, friction_stop
+from ._nl_friction import friction_waveform as friction_waveform
+from ._nl_logpoly import logpoly_mode, lowest_informed_amplitude
 from ._observation import CalibrationError
 from ._problem import FitProblem, recording_design
 from ._short_windows import short_window_points
@@ -70,23 +73,32 @@ class NonlinearProblem(eqx.Module):
     Attributes:
         base: The linear problem (recordings, whisker, weights).
         a_ref: Reference amplitude (m) that scales the nonlinear parameters.
-        terms: The nonlinear terms fitted (a subset of :data:`ALL_TERMS`).
+        terms: The nonlinear terms fitted (a subset of :data:`ALL_TERMS`; empty for a
+            log-polynomial backbone).
+        n_knots: 0 for the parametric backbone, else the knots of a log-polynomial backbone
+            (:mod:`._nl_logpoly`; ``nl`` then holds its values at knots 2…).
+        ln_a_lo: ``ln a_lo`` (m) of a log-polynomial backbone's first knot (None without one).
     """
 
     base: FitProblem
     a_ref: Array
     terms: tuple[str, ...] = eqx.field(static=True)
+    n_knots: int = eqx.field(static=True, default=0)
+    ln_a_lo: Array | None = None
 
     def __check_init__(self):
         if jnp.shape(self.a_ref) != ():
             raise ValueError("NonlinearProblem.a_ref must be a scalar")
-        if not self.terms or any(t not in ALL_TERMS for t in self.terms):
+        if self.n_knots and (self.terms or self.ln_a_lo is None):
+            raise ValueError("a log-polynomial backbone takes no terms and needs ln_a_lo")
+        if not self.n_knots and (not self.terms or any(t not in ALL_TERMS for t in self.terms)):
             raise ValueError(f"terms must be a non-empty subset of {ALL_TERMS}")
 
     def zero_params(self) -> dict:
-        """The linear problem's pytree plus ``nl`` (one entry per term)."""
+        """The linear problem's pytree plus ``nl`` (one entry per term, or the polynomial's
+        ``S_f``, ``S_z`` at knots 2…)."""
         p = self.base.zero_params()
-        p["nl"] = np.zeros(len(self.terms))
+        p["nl"] = np.zeros(2 * (self.n_knots - 1) if self.n_knots else len(self.terms))
         return p
 
     def flatten(self, params) -> Array:
@@ -105,7 +117,10 @@ class NonlinearProblem(eqx.Module):
         return out
 
     def mode(self, params) -> NonlinearMode:
-        """The first mode at ``params`` (physical coefficients from the scaled ones)."""
+        """The first mode at ``params`` (physical coefficients from the scaled ones, or the
+        log-polynomial backbone)."""
+        if self.n_knots:
+            return logpoly_mode(self, params)
         w = self.base.whisker(params)
         s = self.scaled(params)
         w0 = w.omega_rad_s[0]
@@ -130,6 +145,12 @@ class NonlinearProblem(eqx.Module):
             D, g = recording_design(rec, w, p)
             obs = _observed_per_metre(rec, mode, w)
             a0 = jnp.hypot(p["c"][2], p["c"][2 + nm]) / (jnp.abs(rec.scale) * obs)
+            if rec.observable == "acceleration":
+                # an accelerometer reads a·ω(a)², not a·ω₀²: two fixed-point steps put the
+                # start on the backbone (each leaves (Δω/ω)² of the last one's error)
+                a_obs = a0
+                for _ in range(2):
+                    a0 = a_obs * (mode.omega0 / mode.omega(a0)) ** 2
             a, phi = slow_flow(mode, rec.t, a0)
             if "coulomb" in self.terms:
                 psi = phi - jnp.arctan2(p["c"][2 + nm], p["c"][2])
@@ -175,83 +196,6 @@ class NonlinearProblem(eqx.Module):
             out[f"backbone_f_{i}"] = m.frequency_hz(amplitudes[i])
             out[f"backbone_zeta_{i}"] = m.zeta(amplitudes[i])
         return out
-
-
-def friction_waveform(psi: Array) -> Array:
-    """Dry friction's exact correction to ``a cos ψ`` per ``F/ω₀²``, one period of ``ψ``.
-
-    Between two turns of the velocity the mode is a cosine ``A_k cos ψ + d_k`` about a
-    centre ``d_k = (F/ω₀²) sgn(sin ψ)`` (the side it moves from), and each turn lowers
-    ``A_k`` by ``2F/ω₀²``: a staircase, which the slow flow's ``a(t)`` follows as a straight
-    line through its middles. The difference, ``(A_k − a)cos ψ = (F/ω₀²)(2θ/π − 1)cos ψ``
-    with ``θ = ψ mod π``, plus the centre, is the exact free response's departure from
-    ``a cos ψ``:
-
-        w(ψ) = sgn(sin ψ) + (2θ/π − 1) cos ψ,
-
-    continuous (and once differentiable) in ``ψ``, odd harmonics only; its first is
-    ``(3/π) sin ψ`` and its 3rd, 5th… are the square wave's, which a sampled recording well
-    above ``f₀`` sees.
-    """
-    theta = jnp.mod(psi, jnp.pi)
-    side = jnp.where(jnp.mod(psi, 2 * jnp.pi) < jnp.pi, 1.0, -1.0)  # sgn(sin ψ), at turns too
-    return side + (2 * theta / jnp.pi - 1) * jnp.cos(psi)
-
-
-def friction_stop(mode, t, a, psi):
-    """Where dry friction stops the decay, and where it holds the whisker.
-
-    The slow flow's envelope falls to 0 and stays (:func:`whiskerid.model.slow_flow`), but the
-    exact motion stops at a turn of the velocity, ``ψ = kπ``, the first one where the
-    restoring force no longer beats friction: ``|u| ≤ F/ω₀²``. At a turn the exact position is
-    ``a(t_k) cos kπ`` with ``a`` the averaged envelope continued straight through 0 (each half
-    cycle lowers it by ``2F/ω₀²``; continued below 0 it still gives the right turn, on the
-    side the whisker came from), and the whisker stays there.
-
-    Args:
-        mode: The mode (``F``, ``ω₀``).
-        t: Sample times (s).
-        a: The slow flow's envelope (m), clamped at 0.
-        psi: The deflection's phase ``ψ`` at ``t`` (turns at multiples of π).
-
-    Returns:
-        ``(a, held, hold)``: the envelope continued to the stop and 0 after it, the mask of
-        held samples, and the held deflection (m at the tip; 0 before the stop).
-    """
-    n = t.size
-    alive = a > 0
-    last = jnp.maximum(jnp.sum(alive) - 1, 0)
-    # near 0 friction dominates: the envelope falls on a straight line
-    a = jnp.where(alive, a, a[last] + mode.decay_rate(a[last]) * (t - t[last]))
-    k = jnp.floor(psi / jnp.pi)
-    frac = (k[1:] * jnp.pi - psi[:-1]) / jnp.where(psi[1:] > psi[:-1], psi[1:] - psi[:-1], 1.0)
-    a_turn = jnp.concatenate([a[:1], a[:-1] + frac * (a[1:] - a[:-1])])
-    turned = jnp.concatenate([jnp.zeros(1, bool), k[1:] > k[:-1]])
-    stops = turned & (jnp.abs(a_turn) <= mode.coulomb_m_s2 / mode.omega0**2)
-    first = jnp.min(jnp.where(stops, jnp.arange(n), n))
-    held = jnp.arange(n) >= first
-    at = jnp.minimum(first, n - 1)
-    hold = jnp.where(held, jnp.cos(k[at] * jnp.pi) * a_turn[at], 0.0)
-    return jnp.where(held, 0.0, a), held, hold
-
-
-def _friction_offset(rec, psi, held, mode, per_m):
-    """Dry friction's departure from the averaged ``a cos ψ`` in normalised observed units
-    (:func:`friction_waveform`, times ``F/ω₀²`` at the tip), 0 once held
-    (:func:`friction_stop`; the held level is fitted).
-
-    A deflection sensor sees all of it; an accelerometer only the staircase part
-    (``ü = −ω₀²(u − d_k)``: the centre is not accelerated), ``(2θ/π − 1)cos ψ`` in the
-    observed phase (the sign flips with ``ü``'s half-period shift and the odd symmetry), and
-    nothing once the whisker is held.
-    """
-    offset = mode.coulomb_m_s2 / mode.omega0**2  # m at the tip
-    if rec.observable == "acceleration":
-        theta = jnp.mod(psi, jnp.pi)
-        wave = jnp.where(held, 0.0, offset * (2 * theta / jnp.pi - 1) * jnp.cos(psi))
-    else:
-        wave = jnp.where(held, 0.0, offset * friction_waveform(psi))
-    return jnp.abs(rec.scale) * per_m * wave
 
 
 def _observed_per_metre(rec, mode, whisker):
@@ -314,6 +258,7 @@ def calibrate_nonlinear(
     solver: str = "levenberg-marquardt",
     max_steps: int = 400,
     free_modes: bool = False,
+    knots: int = 0,
 ) -> NonlinearCalibration:
     """Fit the nonlinear model, starting from a converged linear calibration.
 
@@ -327,6 +272,12 @@ def calibrate_nonlinear(
         max_steps: Solver step limit.
         free_modes: Modes 2… (when the linear fit has them) with their own frequency and
             damping, started at the data's line (:mod:`._nl_free_modes`), not the beam's.
+        knots: 0 for the parametric backbone (``terms``); ``K ≥ 2`` for ``f(a)``, ``ζ(a)``
+            as polynomials in ``ln a`` through ``K`` knots (:mod:`._nl_logpoly`; ``terms``
+            ignored; ``f1_hz`` and ``zeta`` are then the values at the smallest informed
+            amplitude ``diagnostics["a_lo_m"]``, not ``a → 0``). A study tool: on SciPy
+            plucks its ``f(a)`` is right within its 1σ, its ``ζ(a)`` under velocity-squared
+            damping is not (pulls to 6).
 
     Returns:
         A :class:`NonlinearCalibration`; never raises on a failed solve (see ``status``).
@@ -355,9 +306,15 @@ def calibrate_nonlinear(
         / (abs(float(r.scale)) * float(_observed_per_metre(r, mode_l, wl)))
         for r, p in zip(base.recordings, linear.optimum["recs"], strict=True)
     ]
-    problem = NonlinearProblem(base=base, a_ref=jnp.asarray(max(amps)), terms=terms)
+    if knots:
+        terms = ()
+        flexible = {"n_knots": int(knots),
+                  "ln_a_lo": jnp.log(lowest_informed_amplitude(linear, amps))}  # fmt: skip
+    else:
+        flexible = {}
+    problem = NonlinearProblem(base=base, a_ref=jnp.asarray(max(amps)), terms=terms, **flexible)
     theta0 = dict(linear.optimum)
-    theta0["nl"] = jnp.zeros(len(terms))
+    theta0["nl"] = jnp.zeros_like(problem.zero_params()["nl"])
     if free_modes and nm > 1:
         from ._nl_free_modes import free_higher_modes
 
@@ -387,6 +344,7 @@ def calibrate_nonlinear(
         "model": "nonlinear",
         **fit_diagnostics(per_rec, obs, res, resid_w, s2=s2, gcos=gcos, uncertainty=uncertainty),
         "a_ref_m": float(problem.a_ref),
+        **_logpoly_diagnostics(problem),
         # RSS of the linear fit over the nonlinear one (normalised data, unweighted)
         "linear_rss_over_nonlinear": _rss_linear(linear)
         / max(_rss_nonlinear(problem, core), 1e-300),
@@ -419,6 +377,13 @@ def calibrate_nonlinear(
     return out
 
 
+def _logpoly_diagnostics(problem) -> dict:
+    if not problem.n_knots:
+        return {}
+    a_lo = float(np.exp(problem.ln_a_lo))
+    return {"backbone_model": "log-polynomial", "knots": problem.n_knots, "a_lo_m": a_lo}
+
+
 def _rss_linear(cal: Calibration) -> float:
     """Unweighted normalised RSS of the linear fit (comparable with the nonlinear one)."""
     return float(sum(np.sum(((np.asarray(m) - y) / np.std(y)) ** 2) for _, y, m in cal.curves))
@@ -431,6 +396,13 @@ def _rss_nonlinear(problem, core) -> float:
 
 
 def _note(linear_note: str, terms) -> str:
+    if not terms:
+        return (
+            f"{linear_note} Backbone f(a), zeta(a): polynomials in ln a. f1 and zeta are "
+            "their values at the smallest informed amplitude a_lo (diagnostics a_lo_m), not "
+            "a -> 0 values; the backbone is identified only between a_lo and the largest "
+            "amplitude recorded."
+        )
     return (
         f"{linear_note} Nonlinear terms fitted: {', '.join(terms)}. f1 and zeta are the "
         "small-amplitude (a -> 0) values; the backbone f(a), zeta(a) is identified only "
@@ -543,6 +515,12 @@ def _updated_record(cal: NonlinearCalibration):
         fit["warnings"] = list(cal.warnings)
     fit["params"] = {k: {"value": v["value"], "std": v["std"], "source": v["source"]}
                      for k, v in p.items()}  # fmt: skip
+    if cal.problem.n_knots:  # an identified f(a), ζ(a): no a → 0 values or coefficients
+        from ._nl_logpoly import logpoly_table
+
+        fit["nonlinear"] = logpoly_table(cal)
+        extra["fit"] = fit
+        return rec.replace(zeta=p["zeta"]["value"], extra=extra)
     fit["nonlinear"] = {
         "f0_hz": p["f1_hz"]["value"],
         "zeta0": p["zeta"]["value"],

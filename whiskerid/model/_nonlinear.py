@@ -235,6 +235,11 @@ def nonlinear_coefficients(record) -> dict | None:
     nl = (record.extra.get("fit") or {}).get("nonlinear")
     if not nl:
         return None
+    if nl.get("backbone_model") == "log-polynomial":
+        raise ValueError(
+            "this record's backbone f(a), zeta(a) is an identified curve (a log-polynomial "
+            "fit), which simulate cannot play: calibrate with the parametric nonlinear model"
+        )
     out = {k: float(nl.get(k, 0.0)) for k in COEFFICIENTS}
     if "f0_hz" in nl:  # the a → 0 frequency (the record's κ is the linear fit's)
         out["f0_hz"] = float(nl["f0_hz"])

@@ -159,6 +159,11 @@ def setup_nonlinear(record, obs, *, n_modes, pin, likelihood, nu, marginalize, u
     Args: as :func:`whiskerid.posterior.setup_posterior` (``user_prior``: the parsed
     ``[prior]`` table); ``nl_terms``: the terms to sample (the record's by default).
     """
+    if ((record.extra.get("fit") or {}).get("nonlinear") or {}).get("backbone_model"):
+        raise PosteriorError(
+            "this record's backbone is an identified log-polynomial curve, which posterior "
+            "does not sample: calibrate with the parametric nonlinear model to sample it"
+        )
     if ((record.extra.get("fit") or {}).get("nonlinear") or {}).get("free_modes"):
         raise PosteriorError(
             "this record's nonlinear fit has free higher modes (calibrate --free-modes), which "
