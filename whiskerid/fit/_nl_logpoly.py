@@ -186,9 +186,9 @@ def lowest_informed_amplitude(linear, amps) -> float:
 def information_scale(cal) -> tuple[float, float, int]:
     """``(s², r, n)`` of a fit for the criterion: unweighted residual variance (normalised
     data), median HAC-over-white variance ratio of its reported values, samples."""
-    from ._nonlinear import _rss_nonlinear
+    from ._nonlinear import rss_of_curves
 
-    rss = _rss_nonlinear(cal.problem, cal.optimum)
+    rss = rss_of_curves(cal)
     n = sum(int(r.t.size) for r in cal.problem.base.recordings)
     p = int(cal.problem.flatten(cal.optimum).size)
     ratios = [(v["std"] / v["std_white"]) ** 2 for v in cal.params.values()
@@ -198,11 +198,11 @@ def information_scale(cal) -> tuple[float, float, int]:
 
 def criterion(cal, scale) -> float:
     """``RSS/(s²r) + p ln n`` of ``cal`` on the common ``scale = (s², r, n)``."""
-    from ._nonlinear import _rss_nonlinear
+    from ._nonlinear import rss_of_curves
 
     s2, r, n = scale
     p = int(cal.problem.flatten(cal.optimum).size)
-    return _rss_nonlinear(cal.problem, cal.optimum) / (s2 * r) + p * np.log(n)
+    return rss_of_curves(cal) / (s2 * r) + p * np.log(n)
 
 
 def calibrate_logpoly_backbone(linear, observations, *, knots=KNOTS, **kwargs):

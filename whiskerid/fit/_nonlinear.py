@@ -346,7 +346,7 @@ def calibrate_nonlinear(
         "a_ref_m": float(problem.a_ref),
         **_logpoly_diagnostics(problem),
         # RSS of the linear fit over the nonlinear one (normalised data, unweighted)
-        "linear_rss_over_nonlinear": _rss_linear(linear)
+        "linear_rss_over_nonlinear": rss_of_curves(linear)
         / max(_rss_nonlinear(problem, core), 1e-300),
     }
     warnings = _poor_fit_warnings(per_rec)
@@ -384,8 +384,9 @@ def _logpoly_diagnostics(problem) -> dict:
     return {"backbone_model": "log-polynomial", "knots": problem.n_knots, "a_lo_m": a_lo}
 
 
-def _rss_linear(cal: Calibration) -> float:
-    """Unweighted normalised RSS of the linear fit (comparable with the nonlinear one)."""
+def rss_of_curves(cal: Calibration) -> float:
+    """Unweighted normalised RSS of a fit's curves (a linear or a nonlinear fit: comparable
+    with each other)."""
     return float(sum(np.sum(((np.asarray(m) - y) / np.std(y)) ** 2) for _, y, m in cal.curves))
 
 
