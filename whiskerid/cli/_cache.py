@@ -42,9 +42,12 @@ def enable_compile_cache() -> Path | None:
 
 def use_compile_cache(folder: Path | None) -> None:
     """Point JAX's persistent compilation cache at ``folder`` once JAX is imported (a
-    command's own option overrides the environment), or switch it off with None."""
+    command's own option overrides the environment), or switch it off with None. whiskerid's
+    own saved programs (``programs/``, :mod:`whiskerid.fit`'s window fits among them) follow
+    the same choice, through :data:`CACHE_ENV`."""
     import jax
 
+    os.environ[CACHE_ENV] = "off" if folder is None else str(folder)
     if folder is None:
         jax.config.update("jax_enable_compilation_cache", False)
         return
