@@ -158,6 +158,13 @@ def thin(o, stride: int):
                           source=o.source, selection=o.selection)  # fmt: skip
 
 
+def repeats(data: Path, length_cm: int, stride: int, count: int | None = None):
+    """The beam's record and its recordings at ``length_cm`` (every ``stride``-th sample; the
+    first ``count`` files in name order, all when None)."""
+    paths = sorted((data / f"{length_cm}cm").glob("*.npy"))[:count]
+    return beam_record(length_cm), [thin(observation(p), stride) for p in paths]
+
+
 def spread(values, stds) -> dict:
     v, s = np.asarray(values), np.asarray(stds)
     mean = float(np.average(v, weights=1 / s**2))
@@ -249,9 +256,7 @@ def main(argv=None) -> int:
         return 2
     summary = {}
     for length_cm in args.lengths:
-        record = beam_record(length_cm)
-        paths = sorted((args.data / f"{length_cm}cm").glob("*.npy"))
-        obs = [thin(observation(p), args.stride) for p in paths]
+        record, obs = repeats(args.data, length_cm, args.stride)
         rows = []
         # the second bending mode's line in the data (the beam puts it 2-5 % off)
         f2_line = _line_near(obs, second_mode_hz(record))

@@ -31,8 +31,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from calibrate_cantilever import ROOT, beam_record, observation
-from calibrate_cantilever_nonlinear import noise_ratio, second_mode_hz, spread, thin
+from calibrate_cantilever import ROOT
+from calibrate_cantilever_nonlinear import noise_ratio, repeats, second_mode_hz, spread
 
 import whiskerid as wi
 from whiskerid.fit import calibrate_nonlinear
@@ -106,9 +106,7 @@ def main(argv=None) -> int:
         return 2
     summary = {}
     for length in args.lengths:
-        record = beam_record(length)
-        paths = sorted((args.data / f"{length}cm").glob("*.npy"))[: args.repeats]
-        obs = [thin(observation(p), STRIDE[length]) for p in paths]
+        record, obs = repeats(args.data, length, STRIDE[length], args.repeats)
         n = min(o.t.size for o in obs)
         obs = [cut(o, n) for o in obs]
         lines = [_line_near(obs, second_mode_hz(record))]
