@@ -139,3 +139,15 @@ def test_simulate_refuses_a_log_polynomial_record():
     record = paper_record().replace(extra={"fit": {"model": "nonlinear", "nonlinear": nl}})
     with pytest.raises(ValueError, match="identified curve"):
         nonlinear_coefficients(record)
+
+
+def test_posterior_refuses_a_log_polynomial_record():
+    from whiskerid.fit import Observation
+    from whiskerid.posterior import PosteriorError, setup_posterior
+
+    nl = {"backbone_model": "log-polynomial", "f_lo_hz": 46.0, "zeta_lo": 0.03}
+    record = paper_record().replace(extra={"fit": {"model": "nonlinear", "nonlinear": nl}})
+    t = np.arange(200) / 860.0
+    obs = Observation(t, np.exp(-9 * t) * np.cos(2 * np.pi * 46 * t), observable="deflection")
+    with pytest.raises(PosteriorError, match="identified log-polynomial curve"):
+        setup_posterior(record, obs)
