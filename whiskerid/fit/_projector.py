@@ -25,13 +25,8 @@ class LinearPart:
     """
 
     def __init__(self, jac: np.ndarray):
-        jac = np.asarray(jac)
-        scale = np.linalg.norm(jac, axis=0)
-        self._scale = np.where(scale > 0, scale, 1.0)
-        u, s, vt = np.linalg.svd(jac / self._scale, full_matrices=False)
-        keep = s > (s[0] if s.size else 0.0) * max(jac.shape) * np.finfo(float).eps
-        self.u = u[:, keep]
-        self._vs = vt[keep].T / s[keep]  # J⁺ = diag(1/scale) V S⁻¹ Uᵀ
+        self._scale, self.u, s, vt = _scaled_svd(np.asarray(jac))
+        self._vs = vt.T / s  # J⁺ = diag(1/scale) V S⁻¹ Uᵀ
 
     def project(self, z: np.ndarray) -> np.ndarray:
         """``Z⊥``: ``z`` less its least-squares fit by ``J``'s columns."""
@@ -63,8 +58,16 @@ class LinearPart:
 def pinv_columns(a: np.ndarray) -> np.ndarray:
     """``A⁺`` of a tall ``A`` (``k × n``) through its column-scaled SVD, with
     :func:`numpy.linalg.lstsq`'s cut of small singular values."""
+    scale, u, s, vt = _scaled_svd(a)
+    return (vt.T / s @ u.T) / scale[:, None]
+
+
+def _scaled_svd(a: np.ndarray):
+    """``(scale, U, S, Vᵀ)`` of ``A`` with unit-norm columns (``A = U S Vᵀ diag(scale)``), the
+    singular values below ``max(n, p)·ε`` of the largest left out, as
+    :func:`numpy.linalg.lstsq` leaves them out."""
     scale = np.linalg.norm(a, axis=0)
     scale = np.where(scale > 0, scale, 1.0)
     u, s, vt = np.linalg.svd(a / scale, full_matrices=False)
     keep = s > (s[0] if s.size else 0.0) * max(a.shape) * np.finfo(float).eps
-    return (vt[keep].T / s[keep] @ u[:, keep].T) / scale[:, None]
+    return scale, u[:, keep], s[keep], vt[keep]

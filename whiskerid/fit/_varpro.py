@@ -34,6 +34,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import _lsq as _lsq
 from ._problem import FitProblem
 
 #: MINPACK's tests: relative reduction of ‖r‖² (actual and predicted), scaled step relative
@@ -106,10 +107,6 @@ def least_squares(problem: FitProblem, masks, flat0, *, max_steps: int):
 
         return jax.jacfwd(both, has_aux=True)(phi)
 
-    def gcos(J, r):
-        norms = jnp.linalg.norm(J, axis=0) * jnp.linalg.norm(r)
-        return jnp.max(jnp.abs(J.T @ r) / jnp.maximum(norms, jnp.finfo(r.dtype).tiny))
-
     def factor(J, diag):  # the SVD of the scaled Jacobian serves every λ at this point
         return jnp.linalg.svd(J / diag, full_matrices=False)
 
@@ -151,7 +148,7 @@ def least_squares(problem: FitProblem, masks, flat0, *, max_steps: int):
             norms = jnp.linalg.norm(J_new, axis=0)
             diag = jnp.where(first, jnp.where(norms > 0, norms, 1.0),
                              jnp.maximum(st["diag"], norms))  # fmt: skip
-            gtest = gcos(J_new, r_new) <= GTOL
+            gtest = _lsq.gradient_cosine_from(J_new, r_new) <= GTOL
             return phi_new, r_new, J_new, cs_new, factor(J_new, diag), diag, gtest
 
         def rejected(_):
