@@ -32,7 +32,7 @@ still prefer the nonlinear terms by BIC, keeps ``ok`` with a model-error term in
 
 import numpy as np
 
-from ._checks import bartlett_meat
+from ._checks import bartlett_meat, lag_below
 from ._chi2 import chi2_sf
 from ._core import _padded as padded_problem
 from ._core import unflatten_numpy
@@ -215,14 +215,7 @@ def test_lag(r: np.ndarray) -> int:
     19 lags and gave p = 0.27 with none. So the threshold here is the larger of the two;
     residuals a misfit leaves correlated (a nonlinear whisker's) keep their lags."""
     n = r.size
-    rc = r - r.mean()
-    f = np.fft.rfft(rc, 2 * n)
-    acf = np.fft.irfft(f * np.conj(f))[:n]
-    acf = acf / max(acf[0], 1e-300)
-    limit = max(0.1, float(np.sqrt(2.0 * np.log(max(n, 2)) / n)))
-    tail_max = np.maximum.accumulate(np.abs(acf[::-1]))[::-1]
-    below = np.flatnonzero(tail_max < limit)
-    lag = int(below[0]) if below.size else n
+    lag = lag_below(r, max(0.1, float(np.sqrt(2.0 * np.log(max(n, 2)) / n))))
     # no lag at all where even lag 1 looks white (the fit's rule keeps one)
     return 0 if lag <= 1 else int(min(lag, n // 4))
 

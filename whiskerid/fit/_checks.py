@@ -113,17 +113,22 @@ def _periodogram(x: np.ndarray, window: np.ndarray) -> np.ndarray:
     return np.abs(np.fft.rfft(x * window))[1:] ** 2
 
 
-def hac_lag(r: np.ndarray) -> int:
-    """Lag after which the residuals' autocorrelation stays below 0.1 in magnitude."""
+def lag_below(r: np.ndarray, limit: float) -> int:
+    """First lag from which the residuals' autocorrelation (by FFT) stays below ``limit`` in
+    magnitude at every later lag; ``r.size`` when it never does."""
     n = r.size
     rc = r - r.mean()
     f = np.fft.rfft(rc, 2 * n)
     acf = np.fft.irfft(f * np.conj(f))[:n]
     acf = acf / max(acf[0], 1e-300)
     tail_max = np.maximum.accumulate(np.abs(acf[::-1]))[::-1]
-    below = np.flatnonzero(tail_max < 0.1)
-    lag = int(below[0]) if below.size else n
-    return int(min(max(lag, 1), n // 4))
+    below = np.flatnonzero(tail_max < limit)
+    return int(below[0]) if below.size else n
+
+
+def hac_lag(r: np.ndarray) -> int:
+    """Lag after which the residuals' autocorrelation stays below 0.1 in magnitude."""
+    return int(min(max(lag_below(r, 0.1), 1), r.size // 4))
 
 
 def hac_covariance(
