@@ -265,7 +265,9 @@ class SamplingProcess:
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
-        self._reader.join(1.0)
+        # The child has ended, so the reader meets the pipe's end at once; on a loaded machine
+        # that can take over a second, and a pipe left open is closed only by the collector.
+        self._reader.join(max(timeout_s, 1.0))
         if proc.stdout is not None and not self._reader.is_alive():
             proc.stdout.close()
 
