@@ -109,6 +109,10 @@ def main() -> None:
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
 
+    # As `whiskerid demo` does: a second run loads the compiled programs (before JAX starts).
+    from whiskerid.cli._cache import enable_compile_cache
+
+    enable_compile_cache()
     from whiskerid.cli._demo_stages import run_demo
 
     with tempfile.TemporaryDirectory() as tmp:
