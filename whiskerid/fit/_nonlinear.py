@@ -46,6 +46,7 @@ from ._checks import check_fit, decay_rates, hac_covariance, no_smaller_than, re
 from ._checks import lag1 as lag1_autocorr
 from ._core import unflatten_numpy
 from ._decay import conversion_average
+from ._nl_accelerometer import accelerometer_columns, start_on_backbone
 from ._nl_core import reported_with_jacobian, solve_nonlinear
 from ._nl_friction import _friction_offset, friction_stop
 from ._nl_friction import friction_waveform as friction_waveform
@@ -145,20 +146,17 @@ class NonlinearProblem(eqx.Module):
             D, g = recording_design(rec, w, p)
             obs = _observed_per_metre(rec, mode, w)
             a0 = jnp.hypot(p["c"][2], p["c"][2 + nm]) / (jnp.abs(rec.scale) * obs)
-            if rec.observable == "acceleration":
-                # an accelerometer reads a·ω(a)², not a·ω₀²: two fixed-point steps put the
-                # start on the backbone (each leaves (Δω/ω)² of the last one's error)
-                a_obs = a0
-                for _ in range(2):
-                    a0 = a_obs * (mode.omega0 / mode.omega(a0)) ** 2
+            if rec.observable == "acceleration":  # it reads a·|K(a)|, not a·ω₀²
+                a0 = start_on_backbone(mode, a0)
             a, phi = slow_flow(mode, rec.t, a0)
             if "coulomb" in self.terms:
                 psi = phi - jnp.arctan2(p["c"][2 + nm], p["c"][2])
                 a, held, _ = friction_stop(mode, rec.t, a, psi)
             env = a / jnp.maximum(a0, 1e-300)
             if rec.observable == "acceleration":
-                env = env * (mode.omega(jnp.maximum(a, 0.0)) / mode.omega(a0)) ** 2
-            c, s = env * jnp.cos(phi), env * jnp.sin(phi)
+                c, s = accelerometer_columns(mode, jnp.maximum(a, 0.0), a0, env, phi)
+            else:
+                c, s = env * jnp.cos(phi), env * jnp.sin(phi)
             if rec.avg_offsets is not None:
                 wd = mode.omega(a) * jnp.sqrt(1 - mode.zeta0**2)
                 re, im = conversion_average(mode.zeta0 * mode.omega0 + 0 * wd, wd, rec.avg_offsets)
