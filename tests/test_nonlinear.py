@@ -379,3 +379,76 @@ def test_term_selection_drops_what_the_data_do_not_need():
     for name in ("zeta", "quadratic_per_m"):
         p = nl.params[name]
         assert abs(p["value"] - truth[name]) < 3 * p["std"], (name, p, truth[name])
+
+
+def _same(a, b, rel, path=""):
+    """Paths where two JSON-like values differ (floats by more than ``rel``)."""
+    if isinstance(a, dict):
+        return [d for k in a for d in _same(a[k], b[k], rel, f"{path}.{k}")]
+    if isinstance(a, list | tuple):
+        if len(a) != len(b):
+            return [path]
+        pairs = enumerate(zip(a, b, strict=True))
+        return [d for i, (x, y) in pairs for d in _same(x, y, rel, f"{path}[{i}]")]
+    if isinstance(a, float) and isinstance(b, float):
+        return [] if a == pytest.approx(b, rel=rel, abs=1e-300) else [(path, a, b)]
+    return [] if a == b else [(path, a, b)]
+
+
+@pytest.mark.slow
+def test_nonlinear_recordings_in_one_bucket_share_programs_and_the_padding_counts_for_nothing(
+    monkeypatch,
+):
+    """Two SciPy plucks of 442 and 430 samples (both padded to 448), the second with dry
+    friction that stops the whisker inside the recording (a held level): the second fit
+    compiles nothing, and both are the fits without padding, field by field (to 1e-9; the
+    solver's stopping point is at rounding level: its gradient cosine to 1e-12 absolute,
+    and its step count may differ, 18 and 21 here)."""
+    from whiskerid.fit import _nl_core, _short_windows
+    from whiskerid.fit._core import bucket
+
+    compiles: list[str] = []
+
+    def listen(event, duration, **kwargs):
+        if event == "/jax/core/compile/backend_compile_duration":
+            compiles.append(kwargs.get("fun_name"))
+
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    record, first, _ = _pluck(seed=0)
+    f0 = float(record.whisker().natural_frequencies_hz[0])
+    w0, zeta0, a_s = 2 * np.pi * f0, 0.031, 2e-3 / float(tip_per_sensor(
+        record.whisker().with_modes(1), record.sensor_position_m))  # fmt: skip
+    friction = np.pi * w0**2 * 0.25 * zeta0 * a_s / 2  # ζ 1.25× at release
+    rng = np.random.default_rng(5)
+    t = np.arange(430) / 860.0 + rng.uniform(0, 1 / 860)
+    u = scipy_decay(np.concatenate([[0.0], t]), friction=friction, u0=a_s, zeta0=zeta0, f0=f0)
+    assert np.ptp(u[-40:]) == 0  # held at the end
+    gain = nominal_gain(record, "voltage")
+    y = 1.65 + gain * u[1:] + rng.normal(0, np.std(gain * u) / 100, t.size)
+    second = Observation(t, y, observable="voltage", gain=gain)
+    assert bucket(first.t.size) == bucket(second.t.size) == 448 != second.t.size
+    fits, counts = [], []
+    for obs in (first, second):
+        before = len(compiles)
+        fits.append(calibrate(record, obs, n_modes=1, model="nonlinear"))
+        counts.append(compiles[before:])
+    assert counts[1] == [], counts[1]
+    assert fits[1].ok and fits[1].params["coulomb_m_s2"]["value"] > 0
+    # the same fits without any padding: the programs' recordings and the window fits' rows
+    monkeypatch.setattr(_nl_core, "pad_base",
+                        lambda b: (b, [np.ones(r.t.shape[0]) for r in b.recordings]))  # fmt: skip
+    monkeypatch.setattr(_short_windows, "bucket", lambda n: n)
+    for obs, fit in zip((first, second), fits, strict=True):
+        ref = calibrate(record, obs, n_modes=1, model="nonlinear")
+        a, b = ref.to_json(), fit.to_json()
+        # the solver's stopping point at rounding level: its gradient test and step count
+        gcos = [d.pop("gradient_cosine") for d in (a["diagnostics"], b["diagnostics"])]
+        assert abs(gcos[0] - gcos[1]) < 1e-12
+        steps = [d.pop("steps") for d in (a["diagnostics"], b["diagnostics"])]
+        print("steps without and with padding", steps)
+        assert _same(a, b, 1e-9) == []
+        scale = np.sqrt(np.outer(np.diag(ref.covariance), np.diag(ref.covariance)))
+        assert np.max(np.abs(fit.covariance - ref.covariance) / scale) < 1e-9
+        for (_, _, m), (_, _, m_ref) in zip(fit.curves, ref.curves, strict=True):
+            assert m.shape == m_ref.shape == obs.t.shape
+            np.testing.assert_allclose(m, m_ref, rtol=0, atol=1e-9 * np.std(obs.y))

@@ -79,6 +79,8 @@ class NonlinearProblem(eqx.Module):
         n_knots: 0 for the parametric backbone, else the knots of a log-polynomial backbone
             (:mod:`._nl_logpoly`; ``nl`` then holds its values at knots 2…).
         ln_a_lo: ``ln a_lo`` (m) of a log-polynomial backbone's first knot (None without one).
+        masks: Per recording, 1 for a sample and 0 for the zero-weight padding of its shape
+            bucket (:func:`whiskerid.fit._nl_core.padded`); None when not padded.
     """
 
     base: FitProblem
@@ -86,6 +88,7 @@ class NonlinearProblem(eqx.Module):
     terms: tuple[str, ...] = eqx.field(static=True)
     n_knots: int = eqx.field(static=True, default=0)
     ln_a_lo: Array | None = None
+    masks: tuple[Array, ...] | None = None
 
     def __check_init__(self):
         if jnp.shape(self.a_ref) != ():
@@ -142,7 +145,7 @@ class NonlinearProblem(eqx.Module):
         mode = self.mode(params)
         nm = self.base.n_modes
         out = []
-        for rec, p in zip(self.base.recordings, params["recs"], strict=True):
+        for i, (rec, p) in enumerate(zip(self.base.recordings, params["recs"], strict=True)):
             D, g = recording_design(rec, w, p)
             obs = _observed_per_metre(rec, mode, w)
             a0 = jnp.hypot(p["c"][2], p["c"][2 + nm]) / (jnp.abs(rec.scale) * obs)
@@ -167,18 +170,20 @@ class NonlinearProblem(eqx.Module):
                 # the held level is profiled out (a free constant after the stop): the stop's
                 # turn is discrete, and one turn more or less would move the exact level by
                 # 2F/ω₀², a step over the whole rest of the recording (a rugged cost)
-                level = jnp.sum(jnp.where(held, rec.y - D @ p["c"] - g, 0.0))
-                g = g + jnp.where(held, level / jnp.maximum(jnp.sum(held), 1), 0.0)
+                real = held if self.masks is None else held & (self.masks[i] > 0)
+                level = jnp.sum(jnp.where(real, rec.y - D @ p["c"] - g, 0.0))
+                g = g + jnp.where(held, level / jnp.maximum(jnp.sum(real), 1), 0.0)
             out.append((D, g, jnp.maximum(a, 0.0)))
         return out
 
     def residuals(self, params) -> Array:
-        """Weighted residuals of all recordings, one vector."""
+        """Weighted residuals of all recordings, one vector (0 where padded)."""
+        masks = self.masks or (1.0,) * len(self.base.recordings)
         return jnp.concatenate(
             [
-                (D @ p["c"] + g - r.y) * r.weight
-                for (D, g, _), r, p in zip(
-                    self.design(params), self.base.recordings, params["recs"], strict=True
+                (D @ p["c"] + g - r.y) * r.weight * m
+                for (D, g, _), r, p, m in zip(
+                    self.design(params), self.base.recordings, params["recs"], masks, strict=True
                 )
             ]
         )
