@@ -3,7 +3,8 @@
 Used by ``benchmarks/calibrate.py --cli`` (see there). Every run is a fresh process, as a user
 runs it: ``whiskerid calibrate`` with an empty compile cache (cold), then again (warm), then on
 a recording of another length in the same shape bucket and in the next one; ``--model
-nonlinear`` on the same file, cold and warm, next to the linear fit; the library from
+nonlinear`` on the same file, cold and warm, next to the linear fit, and on the recording of
+another length in the same bucket; the library from
 a fresh interpreter (``wi.calibrate`` on the same file, the same cache); and the peer,
 ``benchmarks/scipy_pluck.py`` (NumPy and SciPy only, the same model and data), with the
 fitted f_1, ζ and 1σ of each. One instrumented run (:data:`SPLIT`) says where a warm run's
@@ -141,10 +142,13 @@ def cli(repeats: int = 3) -> dict:
     res["cli_warm_s"], res["cli_warm_cpu_s"], _ = _run(calibrate(files[5.0]), env, repeats)
     res["cli"] = _fitted(out)
     # the nonlinear model on the same file, next to the linear fit (its programs are kept on
-    # disk too; each recording length has its own)
+    # disk too, one per shape bucket), and on a recording of another length in its bucket
     nonlinear = [*calibrate(files[5.0]), "--model", "nonlinear"]
     res["cli_nonlinear_cold_s"] = _run(nonlinear, env)[0]
     res["cli_nonlinear_warm_s"], res["cli_nonlinear_warm_cpu_s"], _ = _run(nonlinear, env, repeats)
+    res["cli_nonlinear_other_length_same_bucket_s"], res["cli_nonlinear_other_length_cpu_s"], _ = (
+        _run([*calibrate(files[4.9]), "--model", "nonlinear"], env)
+    )
     res["cli_other_length_same_bucket_s"] = _run(calibrate(files[4.9]), env)[0]
     res["cli_next_bucket_first_s"] = _run(calibrate(files[6.0]), env)[0]
     res["cli_next_bucket_warm_s"] = _run(calibrate(files[6.0]), env)[0]

@@ -10,11 +10,13 @@ project's model: one mode, read by the Hall sensor at its gain (volts), released
 with cubic stiffening (frequency rise at the release 0.1 % or 0.4 %), velocity-squared damping
 (ζ 1.1× or 1.25× at the release), both, or Coulomb friction (ζ 1.25× at the release); ζ₀
 log-uniform 0.01–0.05, tip amplitude 1–3 mm, white noise at 40 dB SNR, sampled at 200 or
-860 Hz from a random instant after the release. Linear plucks (no nonlinear term) are the
-null cases: the amplitude test must not mark them ``check``. A second set of linear plucks is
-made by the project's own simulator (all modes, ADS1115 codes with conversion averaging, held,
-flicked and tapped, release detection) to measure the false-alarm rate where the linear model
-is exact.
+860 Hz from a random instant after the release. With ``--observables acceleration`` the
+same plucks are also read by an accelerometer at the tip (m/s²): ``ü`` is the equation's
+right-hand side at the integrated state, 0.2 m/s² bias, 40 dB. Linear plucks (no
+nonlinear term) are the null cases: the amplitude test must not mark them ``check``. A second
+set of linear plucks is made by the project's own simulator (all modes, ADS1115 codes with
+conversion averaging, held, flicked and tapped, release detection) to measure the false-alarm
+rate where the linear model is exact.
 
 Pulls are (estimate − truth)/1σ. The nonlinear model is "better" by the project's criterion,
 BIC in its Wald form with the fit's HAC 1σ (a term with ``z² ≥ ln n``, as the term selection
@@ -25,6 +27,7 @@ amplitude: the sensor's deflection times the mode shape's ``φ₁(l)/φ₁(x)``)
 Usage::
 
     python benchmarks/calibrate_nonlinear.py [--seeds 3] [--project-plucks 12] [--out r.json]
+        [--observables voltage acceleration]
 
 Prints one JSON object: per case kind the status rates and pulls, the false-alarm rates,
 and the warm time of one linear and one nonlinear fit of the same recording.
@@ -58,8 +61,10 @@ KINDS = {
 }
 
 
-def reference_decay(t, f0, zeta0, gamma, c, friction, u0):
-    """``u(t)`` of the mode released from rest at ``t = 0`` (SciPy, independent of whiskerid)."""
+def reference_decay(t, f0, zeta0, gamma, c, friction, u0, *, acceleration=False):
+    """``u(t)`` of the mode released from rest at ``t = 0`` (SciPy, independent of whiskerid),
+    or with ``acceleration`` its ``ü(t)``: the right-hand side at the integrated state, with
+    each segment's friction sign (0 once friction holds it)."""
     w0 = 2 * np.pi * f0
 
     def rhs(s, y, sgn):
@@ -71,34 +76,38 @@ def reference_decay(t, f0, zeta0, gamma, c, friction, u0):
         return y[1]
 
     turn.terminal = True
-    out = np.zeros(t.size)
+    out, sgns = np.zeros((2, t.size)), np.zeros(t.size)
     y, s0, sgn = np.array([u0, 0.0]), 0.0, -np.sign(u0)
     while s0 < t[-1]:
         turn.direction = -sgn
         sol = solve_ivp(rhs, (s0, t[-1]), y, args=(sgn,), events=turn, rtol=1e-11,
                         atol=1e-16, method="DOP853", dense_output=True)  # fmt: skip
         sel = (t >= s0) & (t <= sol.t[-1])
-        out[sel] = sol.sol(t[sel])[0]
+        out[:, sel], sgns[sel] = sol.sol(t[sel]), sgn
         y, s0 = sol.y[:, -1].copy(), sol.t[-1]
         if sol.status != 1:
             break
         y[1] = 0.0
         if abs(w0**2 * (y[0] + gamma * y[0] ** 3)) <= friction:  # friction holds it
-            out[t > s0] = y[0]
+            out[:, t > s0], sgns[t > s0] = [[y[0]], [0.0]], 0.0
+            if acceleration:  # held: at rest, unaccelerated
+                return np.where(t > s0, 0.0, rhs(0.0, out, sgns)[1])
             break
         sgn = -sgn
-    return out
+    return np.asarray(rhs(0.0, out, sgns)[1]) if acceleration else out[0]
 
 
-def nonlinear_case(kind, rate_hz, seed):
+def nonlinear_case(kind, rate_hz, seed, observable="voltage"):
     rise, zq, zc = KINDS[kind]
+    acc = observable == "acceleration"
     rng = np.random.default_rng([seed, int(rate_hz), list(KINDS).index(kind)])
     record = paper_record()
     w = record.whisker().with_modes(1)
     f0 = float(w.natural_frequencies_hz[0])
     w0 = 2 * np.pi * f0
     zeta0 = float(np.exp(rng.uniform(np.log(0.01), np.log(0.05))))
-    ratio = float(tip_per_sensor(w, record.sensor_position_m))
+    x_m = record.structure.length_m if acc else record.sensor_position_m
+    ratio = float(tip_per_sensor(w, x_m))
     a_tip = float(rng.uniform(1e-3, 3e-3))
     a_s = a_tip / ratio  # at the sensor
     gamma = rise * 8 / (3 * a_s**2)
@@ -106,11 +115,12 @@ def nonlinear_case(kind, rate_hz, seed):
     friction = np.pi * w0**2 * zc * zeta0 * a_s / 2
     duration = 4.6 / (w0 * zeta0)
     t = np.arange(0.0, duration, 1 / rate_hz) + rng.uniform(0, 1 / rate_hz)
-    u = reference_decay(t, f0, zeta0, gamma, c, friction, a_s)
-    gain = nominal_gain(record, "voltage")
-    y = 1.65 + gain * u
+    u = reference_decay(t, f0, zeta0, gamma, c, friction, a_s, acceleration=acc)
+    gain = 1.0 if acc else nominal_gain(record, "voltage")
+    y = (0.2 if acc else 1.65) + gain * u
     y = y + rng.normal(0, np.std(gain * u) / 100, y.size)  # 40 dB
-    obs = Observation(t, y, observable="voltage", gain=gain, name=f"{kind}@{rate_hz:g}")
+    obs = Observation(t, y, observable=observable, gain=gain, x_m=x_m,
+                      name=f"{kind}@{rate_hz:g}/{observable}")  # fmt: skip
     truth = {
         "f1_hz": f0,
         "zeta": zeta0,
@@ -138,8 +148,8 @@ def wald_nonlinear(nl) -> float:
     return float(x @ np.linalg.solve(nl.covariance[np.ix_(idx, idx)], x))
 
 
-def run_nonlinear(kind, rate_hz, seed):
-    record, obs, truth = nonlinear_case(kind, rate_hz, seed)
+def run_nonlinear(kind, rate_hz, seed, observable="voltage"):
+    record, obs, truth = nonlinear_case(kind, rate_hz, seed, observable)
     t0 = time.perf_counter()
     lin = calibrate(record, obs, n_modes=1)
     t1 = time.perf_counter()
@@ -151,7 +161,7 @@ def run_nonlinear(kind, rate_hz, seed):
     # nonlinear model is better when one of its terms has z² ≥ ln n
     z2 = max(v**2 for v in term_z(nl).values())
     row = {
-        "kind": kind,
+        "kind": kind if observable == "voltage" else f"{kind}/{observable}",
         "rate_hz": rate_hz,
         "seed": seed,
         "zeta0": truth["zeta"],
@@ -220,7 +230,7 @@ def run_project_pluck(i, seed):
 
 def summarise(rows):
     out = {}
-    for kind in KINDS:
+    for kind in dict.fromkeys(r["kind"] for r in rows):
         rs = [r for r in rows if r["kind"] == kind]
         if not rs:
             continue
@@ -277,15 +287,18 @@ def main(argv=None):
     ap.add_argument("--rates", type=float, nargs="+", default=[200.0, 860.0],
                     help="sampling rates (Hz) of the SciPy plucks")  # fmt: skip
     ap.add_argument("--kinds", nargs="+", default=list(KINDS), choices=list(KINDS))
+    ap.add_argument("--observables", nargs="+", default=["voltage"],
+                    choices=["voltage", "acceleration"],
+                    help="Hall sensor (V) and/or an accelerometer at the tip")  # fmt: skip
     ap.add_argument("--out", help="also write the per-case rows here (JSON)")
     args = ap.parse_args(argv)
     rows = []
     for rate in args.rates:
-        for kind in args.kinds:
+        for kind, observable in ((k, o) for k in args.kinds for o in args.observables):
             for s in range(args.seeds):
-                rows.append(run_nonlinear(kind, rate, args.seed + s))
+                rows.append(run_nonlinear(kind, rate, args.seed + s, observable))
                 r = rows[-1]
-                print(f"{kind}@{rate:g} seed {s}: linear {r['linear_status']} "
+                print(f"{r['kind']}@{rate:g} seed {s}: linear {r['linear_status']} "
                       f"nonlinear {r['nonlinear_status']} pull f0 {r['pull_f1_hz']:.2f} "
                       f"zeta0 {r['pull_zeta']:.2f}", file=sys.stderr)  # fmt: skip
     # warm timing: the same recording again, both fits compiled
@@ -298,7 +311,8 @@ def main(argv=None):
     project = [run_project_pluck(i, args.seed) for i in range(args.project_plucks)]
     result = {
         "benchmark": "calibrate_nonlinear",
-        "note": "independent SciPy plucks (one mode, volts, 40 dB); timings on a shared machine",
+        "note": "independent SciPy plucks (one mode, 40 dB; volts, or m/s² where the kind "
+        "ends in /acceleration); timings on a shared machine",
         "summary": summarise(rows),
         "project_linear_plucks": {
             "n": len(project),

@@ -2,7 +2,7 @@
 
 Everything :func:`whiskerid.fit.calibrate_nonlinear` computes with JAX is two traced
 functions, each run through :func:`whiskerid.fit._aot.cached_call` (one program per problem
-structure and recording length, exported on disk and loaded by later runs without tracing):
+structure and shape bucket, exported on disk and loaded by later runs without tracing):
 
 * :func:`nonlinear_core`: the least squares from the linear optimum, each recording weighted
   by its own residual scale and solved again, the residuals and Jacobian at the optimum,
@@ -12,6 +12,15 @@ structure and recording length, exported on disk and loaded by later runs withou
 * :func:`nonlinear_reported`: the reported quantities and the backbone at the amplitude grid,
   with their Jacobian (the grid is read from the first program's envelopes and noise, so it
   is a second program).
+
+Shape buckets, as the linear fit's (module ``_core``): every recording is padded to its
+bucket with zero-weight samples (its last instant repeated: the slow flow takes steps of
+length 0 there and the design's time span is the recording's own), so that recordings of
+other lengths in one bucket share both programs. The padding enters no sum: residuals and
+Jacobian rows are 0 (:attr:`NonlinearProblem.masks`), each recording's weight and ``s²``
+count its real samples only, dry friction's held level averages real samples only, and the
+padded rows and curve samples are cut off before anything else reads them (HAC covariance,
+per-recording figures, window fits).
 
 Called eagerly, the same steps were dozens of small programs traced and looked up afresh in
 every process: about 4 s of a warm command-line nonlinear calibration.
@@ -26,6 +35,8 @@ import numpy as np
 
 from . import _lsq as _lsq
 from ._aot import cached_call
+from ._core import _padded as pad_base
+from ._core import _rows
 
 
 def _flat_residuals(flat, problem):
@@ -33,15 +44,24 @@ def _flat_residuals(flat, problem):
 
 
 def _weights(problem, params):
-    """``1/σ`` of each recording's own residuals at ``params``."""
+    """``1/σ`` of each recording's own residuals at ``params`` (its real samples)."""
     weights = []
-    for (D, g, _), r, p in zip(
-        problem.design(params), problem.base.recordings, params["recs"], strict=True
-    ):
-        res = D @ p["c"] + g - r.y
-        sigma = jnp.sqrt(jnp.sum(res**2) / max(res.size - D.shape[1], 1))
+    for (D, g, _), r, p, m in zip(problem.design(params), problem.base.recordings,
+                                  params["recs"], problem.masks, strict=True):  # fmt: skip
+        res = (D @ p["c"] + g - r.y) * m
+        sigma = jnp.sqrt(jnp.sum(res**2) / jnp.maximum(jnp.sum(m) - D.shape[1], 1.0))
         weights.append(1.0 / jnp.maximum(sigma, 1e-12))
     return jnp.stack(weights)
+
+
+def padded(problem):
+    """``problem`` with every recording padded to its shape bucket (zero-weight samples, the
+    masks in :attr:`NonlinearProblem.masks`; module docstring), and the real lengths."""
+    sizes = [int(r.t.shape[0]) for r in problem.base.recordings]
+    base, masks = pad_base(problem.base)
+    out = eqx.tree_at(lambda q: (q.base, q.masks), problem, (base, tuple(masks)),
+                      is_leaf=lambda x: x is None)  # fmt: skip
+    return out, sizes
 
 
 def _weighted(problem, weights):
@@ -54,7 +74,8 @@ def nonlinear_core(problem, flat0, *, solver: str, max_steps: int, observed_per_
     """Solve, reweight, solve again, and everything read at the optimum (module docstring).
 
     Args:
-        problem: The :class:`whiskerid.fit.NonlinearProblem` (or one with free modes).
+        problem: The :class:`whiskerid.fit.NonlinearProblem` (or one with free modes), padded
+            (:func:`padded`).
         flat0: Start parameters (flat), the linear optimum plus zero nonlinear terms.
         solver: Least-squares solver name.
         max_steps: Solver step limit.
@@ -85,6 +106,7 @@ def nonlinear_core(problem, flat0, *, solver: str, max_steps: int, observed_per_
     problem = _weighted(problem, used[-1])
     resid = _flat_residuals(flat, problem)
     jac = jax.jacfwd(_flat_residuals)(flat, problem)
+    n_real = sum(jnp.sum(m) for m in problem.masks)  # the padding counts for nothing
     out = {
         "value": flat,
         "ok": ok[-1],
@@ -94,7 +116,7 @@ def nonlinear_core(problem, flat0, *, solver: str, max_steps: int, observed_per_
         "resid": resid,
         "jac": jac,
         "bread": _lsq.scaled_inverse_gram(jac),
-        "s2": _lsq.residual_variance(resid, flat.size),
+        "s2": jnp.sum(resid**2) / jnp.maximum(n_real - flat.size, 1.0),
         "gcos": _lsq.gradient_cosine_from(jac, resid),
     }
     params = problem.unflatten(flat)
@@ -122,23 +144,31 @@ def nonlinear_reported(problem, flat, amplitudes) -> dict:
 
 
 def solve_nonlinear(problem, flat0, *, solver: str, max_steps: int, observed_per_metre):
-    """:func:`nonlinear_core` through the program cache, as NumPy, with the problem carrying
-    the weights of its last solve.
+    """:func:`nonlinear_core` through the program cache (one per shape bucket), as NumPy with
+    the padding cut off, with the (unpadded) problem carrying the weights of its last solve.
 
     Returns:
         ``(problem, out)``: the reweighted problem and the program's outputs (NumPy).
     """
     fn = functools.partial(nonlinear_core, solver=solver, max_steps=max_steps,
                            observed_per_metre=observed_per_metre)  # fmt: skip
-    out = cached_call("nonlinear", fn, (problem, flat0), static=(solver, max_steps))
+    big, sizes = padded(problem)
+    out = cached_call("nonlinear", fn, (big, flat0), static=(solver, max_steps))
     out = {k: np.asarray(v) for k, v in out.items()}
+    rows = _rows(sizes, [m.size for m in big.masks], out["resid"].size)
+    out["resid"], out["jac"] = out["resid"][rows], out["jac"][rows]
+    for i, n in enumerate(sizes):
+        for key in ("model", "modal", "env"):
+            out[f"{key}_{i}"] = out[f"{key}_{i}"][:n]
     weights = [out["weights"][i] for i in range(len(problem.base.recordings))]
     problem = eqx.tree_at(lambda q: [r.weight for r in q.base.recordings], problem, weights)
     return problem, out
 
 
 def reported_with_jacobian(problem, flat, amplitudes) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`nonlinear_reported` through the program cache: ``(values, jacobian)``."""
+    """:func:`nonlinear_reported` through the program cache: ``(values, jacobian)`` (the
+    problem padded to its buckets: the values do not read the samples, the program's key
+    does)."""
     out = cached_call("nonlinear-reported", nonlinear_reported,
-                      (problem, np.asarray(flat), np.asarray(amplitudes)))  # fmt: skip
+                      (padded(problem)[0], np.asarray(flat), np.asarray(amplitudes)))  # fmt: skip
     return np.asarray(out["values"]), np.asarray(out["jac"])

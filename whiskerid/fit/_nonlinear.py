@@ -46,6 +46,7 @@ from ._checks import check_fit, decay_rates, hac_covariance, no_smaller_than, re
 from ._checks import lag1 as lag1_autocorr
 from ._core import unflatten_numpy
 from ._decay import conversion_average
+from ._nl_accelerometer import accelerometer_columns, start_on_backbone
 from ._nl_core import reported_with_jacobian, solve_nonlinear
 from ._nl_friction import _friction_offset, friction_stop
 from ._nl_friction import friction_waveform as friction_waveform
@@ -78,6 +79,8 @@ class NonlinearProblem(eqx.Module):
         n_knots: 0 for the parametric backbone, else the knots of a log-polynomial backbone
             (:mod:`._nl_logpoly`; ``nl`` then holds its values at knots 2…).
         ln_a_lo: ``ln a_lo`` (m) of a log-polynomial backbone's first knot (None without one).
+        masks: Per recording, 1 for a sample and 0 for the zero-weight padding of its shape
+            bucket (:func:`whiskerid.fit._nl_core.padded`); None when not padded.
     """
 
     base: FitProblem
@@ -85,6 +88,7 @@ class NonlinearProblem(eqx.Module):
     terms: tuple[str, ...] = eqx.field(static=True)
     n_knots: int = eqx.field(static=True, default=0)
     ln_a_lo: Array | None = None
+    masks: tuple[Array, ...] | None = None
 
     def __check_init__(self):
         if jnp.shape(self.a_ref) != ():
@@ -141,24 +145,21 @@ class NonlinearProblem(eqx.Module):
         mode = self.mode(params)
         nm = self.base.n_modes
         out = []
-        for rec, p in zip(self.base.recordings, params["recs"], strict=True):
+        for i, (rec, p) in enumerate(zip(self.base.recordings, params["recs"], strict=True)):
             D, g = recording_design(rec, w, p)
             obs = _observed_per_metre(rec, mode, w)
             a0 = jnp.hypot(p["c"][2], p["c"][2 + nm]) / (jnp.abs(rec.scale) * obs)
-            if rec.observable == "acceleration":
-                # an accelerometer reads a·ω(a)², not a·ω₀²: two fixed-point steps put the
-                # start on the backbone (each leaves (Δω/ω)² of the last one's error)
-                a_obs = a0
-                for _ in range(2):
-                    a0 = a_obs * (mode.omega0 / mode.omega(a0)) ** 2
+            if rec.observable == "acceleration":  # it reads a·|K(a)|, not a·ω₀²
+                a0 = start_on_backbone(mode, a0)
             a, phi = slow_flow(mode, rec.t, a0)
             if "coulomb" in self.terms:
                 psi = phi - jnp.arctan2(p["c"][2 + nm], p["c"][2])
                 a, held, _ = friction_stop(mode, rec.t, a, psi)
             env = a / jnp.maximum(a0, 1e-300)
             if rec.observable == "acceleration":
-                env = env * (mode.omega(jnp.maximum(a, 0.0)) / mode.omega(a0)) ** 2
-            c, s = env * jnp.cos(phi), env * jnp.sin(phi)
+                c, s = accelerometer_columns(mode, jnp.maximum(a, 0.0), a0, env, phi)
+            else:
+                c, s = env * jnp.cos(phi), env * jnp.sin(phi)
             if rec.avg_offsets is not None:
                 wd = mode.omega(a) * jnp.sqrt(1 - mode.zeta0**2)
                 re, im = conversion_average(mode.zeta0 * mode.omega0 + 0 * wd, wd, rec.avg_offsets)
@@ -169,18 +170,20 @@ class NonlinearProblem(eqx.Module):
                 # the held level is profiled out (a free constant after the stop): the stop's
                 # turn is discrete, and one turn more or less would move the exact level by
                 # 2F/ω₀², a step over the whole rest of the recording (a rugged cost)
-                level = jnp.sum(jnp.where(held, rec.y - D @ p["c"] - g, 0.0))
-                g = g + jnp.where(held, level / jnp.maximum(jnp.sum(held), 1), 0.0)
+                real = held if self.masks is None else held & (self.masks[i] > 0)
+                level = jnp.sum(jnp.where(real, rec.y - D @ p["c"] - g, 0.0))
+                g = g + jnp.where(held, level / jnp.maximum(jnp.sum(real), 1), 0.0)
             out.append((D, g, jnp.maximum(a, 0.0)))
         return out
 
     def residuals(self, params) -> Array:
-        """Weighted residuals of all recordings, one vector."""
+        """Weighted residuals of all recordings, one vector (0 where padded)."""
+        masks = self.masks or (1.0,) * len(self.base.recordings)
         return jnp.concatenate(
             [
-                (D @ p["c"] + g - r.y) * r.weight
-                for (D, g, _), r, p in zip(
-                    self.design(params), self.base.recordings, params["recs"], strict=True
+                (D @ p["c"] + g - r.y) * r.weight * m
+                for (D, g, _), r, p, m in zip(
+                    self.design(params), self.base.recordings, params["recs"], masks, strict=True
                 )
             ]
         )

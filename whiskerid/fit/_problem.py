@@ -477,9 +477,10 @@ def _recording_model(record, o: Observation, n_modes: int) -> RecordingModel:
     if not y_std > 0:
         raise CalibrationError(f"{o.name}: the signal is constant")
     gain = o.gain if o.gain is not None else nominal_gain(record, o.observable)
+    # device_put, not jnp.asarray: the latter compiles a small program per recording length
     return RecordingModel(
-        t=jnp.asarray(o.t - o.t[0]),
-        y=jnp.asarray((o.y - y_mean) / y_std),
+        t=jax.device_put(o.t - o.t[0]),
+        y=jax.device_put((o.y - y_mean) / y_std),
         weight=jnp.asarray(1.0),
         scale=jnp.asarray(gain / y_std),
         hb_m=jnp.asarray(o.hb_m if o.hb_m is not None else 1e-3),

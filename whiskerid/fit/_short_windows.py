@@ -8,6 +8,7 @@ a nonlinear fit's ``f(a)``, ``ζ(a)``, and on flat lines for a linear whisker.
 
 import numpy as np
 
+from ._core import bucket
 from ._windows import fit_windows
 
 #: Periods of the first mode per window.
@@ -38,12 +39,15 @@ def short_window_points(obs, per_rec: list[dict], f1_hz: float) -> dict:
             continue
         y = o.y[: n * m].reshape(n, m)
         t = o.t[: n * m].reshape(n, m)
-        fits = fit_windows(y, t=t)
-        a_obs = np.asarray(fits.amplitude)
+        # the windows padded to a shape bucket with copies of the last (each window is fitted
+        # on its own), so that recordings of other lengths share the compiled window fit
+        rows = np.minimum(np.arange(bucket(n)), n - 1)
+        fits = fit_windows(y[rows], t=t[rows])
+        a_obs = np.asarray(fits.amplitude)[:n]
         # observed amplitude → metres, by the fit's own conversion of the first window
         to_m = r["noise_amplitude_m"] / max(r["rms_residual"] * np.sqrt(2), 1e-300)
-        z = np.asarray(fits.zeta)
-        fd = np.asarray(fits.damped_frequency_hz)
+        z = np.asarray(fits.zeta)[:n]
+        fd = np.asarray(fits.damped_frequency_hz)[:n]
         # the window's f and ζ are averages over it: place them at its middle amplitude
         span = t[:, -1] - t[:, 0]
         a_m = a_obs * to_m * np.exp(-z * 2 * np.pi * fd / np.sqrt(1 - z**2) * span / 2)
