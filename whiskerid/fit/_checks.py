@@ -174,14 +174,19 @@ def bartlett_meat(scores: np.ndarray, lag: int) -> np.ndarray:
     """
     n, p = scores.shape
     width = int(lag) + 1
+    if width == 1:  # no lag (white residuals, the usual case): Γ_0 itself
+        return scores.T @ scores
     mean = scores.mean(axis=0)
     c = np.zeros((n + 1, p))
     np.cumsum(scores - mean, axis=0, out=c[1:])
-    # window k covers rows max(k, 0) .. min(k + width, n) - 1, for k = -(width-1) .. n-1
-    k = np.arange(-(width - 1), n)
-    lo = np.maximum(k, 0)
-    hi = np.minimum(k + width, n)
-    boxes = c[hi] - c[lo] + (hi - lo)[:, None] * mean
+    # window k covers rows max(k, 0) .. min(k + width, n) - 1, for k = -(width-1) .. n-1:
+    # its ends are c[1..n] then c[n] repeated, less c[0] repeated then c[0..n-1] (slices and
+    # repeats, not a gather of n + L rows by index: a third of a warm fit's score tests)
+    pad = width - 1
+    hi = np.concatenate([c[1:], np.broadcast_to(c[n], (pad, p))]) if pad else c[1:]
+    lo = np.concatenate([np.broadcast_to(c[0], (pad, p)), c[:n]]) if pad else c[:n]
+    counts = np.minimum(np.arange(1, n + width), n) - np.maximum(np.arange(-pad, n), 0)
+    boxes = hi - lo + counts[:, None] * mean
     return boxes.T @ boxes / width
 
 
