@@ -43,6 +43,7 @@ from ..model import (
 from . import _lsq as _lsq
 from ._decay import decay_rates, free_decay_columns
 from ._observation import CalibrationError, Observation, StaticTest, nominal_gain
+from ._trig import sincos
 
 ZETA_MAX = 0.95
 
@@ -439,7 +440,9 @@ def recording_design(rec: RecordingModel, w: Whisker, rec_params: dict, *, profi
     span = jnp.maximum(t[-1] - t[0], 1e-12)
     cols = [jnp.ones_like(t)[:, None], ((t - 0.5 * (t[0] + t[-1])) / span)[:, None]]
     sigma, wd = decay_rates(w.omega_rad_s, w.zeta)
-    cols.extend(free_decay_columns(t[:, None], sigma, wd, rec.avg_offsets))
+    # the vectorised sin/cos (module _trig): XLA's are a scalar call per element, most of the
+    # cost of every design the start search, the solver and the Jacobian evaluate
+    cols.extend(free_decay_columns(t[:, None], sigma, wd, rec.avg_offsets, sincos=sincos))
     fixed = jnp.zeros_like(t)
     scale = rec.scale  # physical → normalised observed units (gain / std of y)
     if rec.excitation == "sine":
