@@ -329,13 +329,26 @@ def calibrate(
                   free_modes=free_modes)  # fmt: skip
 
 
-def _nominal_whisker(record: WhiskerRecord, n_modes: int):
-    """``record.whisker().with_modes(n_modes)``, its ζ sliced on the host (the same numbers;
-    JAX's concatenation and slices were eager programs of their own, per calibration)."""
+def _nominal_whisker(record: WhiskerRecord, n_modes: int) -> "_HostWhisker":
+    """``record.whisker().with_modes(n_modes)`` as host numbers (see :class:`_HostWhisker`)."""
     w = record.whisker()
     zeta = np.asarray(w.zeta)
     zeta = np.concatenate([zeta, np.full(max(0, n_modes - zeta.size), zeta[-1])])[:n_modes]
-    return eqx.tree_at(lambda v: v.zeta, w, zeta)
+    return _HostWhisker(eqx.tree_at(lambda v: v.zeta, w, zeta))
+
+
+class _HostWhisker:
+    """What a calibration reads of the record's whisker (the start grid, the problem's
+    constants, the report, the checks), each quantity computed once by the
+    :class:`whiskerid.model.Whisker` itself and kept as a NumPy array: read as properties,
+    each was a chain of eager JAX operations (its eigenvalues, frequencies), several times
+    per calibration."""
+
+    def __init__(self, w):
+        for name in ("length_m", "EI", "rho_a", "zeta", "tip_mass_kg", "sensor_x_m", "mu"):
+            setattr(self, name, np.asarray(getattr(w, name)))
+        self.beta = np.asarray(w.beta)
+        self.natural_frequencies_hz = np.asarray(w.natural_frequencies_hz)
 
 
 def _check_free_modes(model: str, n_modes: int, static, obs) -> None:
