@@ -71,6 +71,7 @@ from ._signal import dominant_peaks as dominant_peaks
 from ._signal import find_peaks as find_peaks
 from ._signal import resample_uniform as resample_uniform
 from ._start import start_values as start_values
+from ._trig import sincos as sincos
 from ._windows import WindowFits as WindowFits
 from ._windows import fit_windows as fit_windows
 from ._windows import window_model_residuals as window_model_residuals

@@ -43,6 +43,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import equinox as eqx
 import numpy as np
 
 from .._choices import PINS, SOLVERS
@@ -54,6 +55,7 @@ from ._checks import (
     LAG1_MAX,
     check_fit,
     decay_rates,
+    peak_reference,
     residual_peak,
     robust_covariance,
 )
@@ -252,7 +254,7 @@ def calibrate(
             "frequency: give the frequency in Hz that the whisker rings at, or leave it out"
         )
     pin = "geometry" if pin == "auto" else pin
-    nominal = record.whisker().with_modes(n_modes)
+    nominal = _nominal_whisker(record, n_modes)
     problem = FitProblem.from_observations(
         record, obs, static=static, n_modes=n_modes, zeta_per_mode=zeta_per_mode, pin=pin,
         nominal=nominal,
@@ -264,7 +266,9 @@ def calibrate(
     if solver not in SOLVERS:
         raise CalibrationError(f"solver must be one of {', '.join(SOLVERS)}; got {solver!r}")
     res = fit_problem(problem, obs, nominal, solver=solver, max_steps=max_steps,
-                      f1_start_hz=f1_start_hz, start=start)  # fmt: skip
+                      f1_start_hz=f1_start_hz, start=start,
+                      meanwhile=lambda: _data_side(obs))  # fmt: skip
+    peak_refs, rates = res.meanwhile
     problem, resid_w, jac, bread, s2 = res.problem, res.resid, res.jac, res.bread, res.s2
     cov = s2 * bread
     # The solver's own test (steps below rtol 1e-10 of every parameter) can stall at
@@ -276,7 +280,8 @@ def calibrate(
     status = "ok" if ok else ("non-finite" if not np.isfinite(float(res.cost)) else "not converged")
 
     optimum = res.optimum
-    per_rec, curves, resid = _per_recording(problem, optimum, obs, res.models, resid_w)
+    per_rec, curves, resid = _per_recording(problem, optimum, obs, res.models, resid_w,
+                                            peak_refs)  # fmt: skip
     uncertainty = "white noise: s^2 (J^T J)^-1"
     cov_white = cov
     if ok:  # a sandwich where the residuals are correlated or their spread changes
@@ -296,8 +301,8 @@ def calibrate(
     warnings = _poor_fit_warnings(per_rec)
     checks = {}
     if ok:
-        checks = check_fit(params, per_rec, float(nominal.natural_frequencies_hz[0]),
-                           decay_rates_hz=decay_rates(obs), f1_expected_hz=f1_start_hz)  # fmt: skip
+        checks = check_fit(params, per_rec, float(np.asarray(nominal.natural_frequencies_hz)[0]),
+                           decay_rates_hz=rates, f1_expected_hz=f1_start_hz)  # fmt: skip
     status, warnings = fit_status(status, ok, warnings, checks)
     out = Calibration(
         status=status,
@@ -322,6 +327,28 @@ def calibrate(
 
     return finish(out, obs, model, nl_terms, resid=resid_w, jac=jac, core=res.amplitude,
                   free_modes=free_modes)  # fmt: skip
+
+
+def _nominal_whisker(record: WhiskerRecord, n_modes: int) -> "_HostWhisker":
+    """``record.whisker().with_modes(n_modes)`` as host numbers (see :class:`_HostWhisker`)."""
+    w = record.whisker()
+    zeta = np.asarray(w.zeta)
+    zeta = np.concatenate([zeta, np.full(max(0, n_modes - zeta.size), zeta[-1])])[:n_modes]
+    return _HostWhisker(eqx.tree_at(lambda v: v.zeta, w, zeta))
+
+
+class _HostWhisker:
+    """What a calibration reads of the record's whisker (the start grid, the problem's
+    constants, the report, the checks), each quantity computed once by the
+    :class:`whiskerid.model.Whisker` itself and kept as a NumPy array: read as properties,
+    each was a chain of eager JAX operations (its eigenvalues, frequencies), several times
+    per calibration."""
+
+    def __init__(self, w):
+        for name in ("length_m", "EI", "rho_a", "zeta", "tip_mass_kg", "sensor_x_m", "mu"):
+            setattr(self, name, np.asarray(getattr(w, name)))
+        self.beta = np.asarray(w.beta)
+        self.natural_frequencies_hz = np.asarray(w.natural_frequencies_hz)
 
 
 def _check_free_modes(model: str, n_modes: int, static, obs) -> None:
@@ -445,7 +472,7 @@ def _report(record, problem, reported, cov, static, nominal, modulus_tolerance=0
             "--modulus-tolerance) is in its 1-sigma; plucks with and without a known tip "
             "mass (--added-mass) measure it instead."
         )
-    if nominal.tip_mass_kg > 0:
+    if float(nominal.tip_mass_kg) > 0:  # a host comparison, not an eager JAX program
         note += (
             f" With the tip mass ({float(nominal.tip_mass_kg):.4g} kg) the mode ratios depend"
             " weakly on mu = M_t/(rho a l); mu was taken from the record."
@@ -472,13 +499,21 @@ def _poor_fit_warnings(per_rec: list[dict]) -> list[str]:
     ]
 
 
-def _per_recording(problem: FitProblem, optimum, obs, models, resid):
+def _data_side(obs) -> tuple[list, list[float]]:
+    """What the checks read of the recordings alone (:func:`_checks.peak_reference` of each,
+    the free decays' sampling rates), computed while the compiled program runs."""
+    return [peak_reference(o.t, o.y) for o in obs], decay_rates(obs)
+
+
+def _per_recording(problem: FitProblem, optimum, obs, models, resid, peak_refs=None):
     """Nuisances and residual diagnostics per recording, the curves for plots, and the
     weighted residual vector (``models``: each recording's normalised model and its modal
-    parts, from the compiled fit)."""
+    parts, from the compiled fit; ``peak_refs``: :func:`_checks.peak_reference` of each
+    recording, when already computed)."""
     out, curves = [], []
-    for spec, rec, (model_n, modal), o in zip(problem.recordings, optimum["recs"], models, obs,
-                                              strict=True):  # fmt: skip
+    peak_refs = peak_refs or [None] * len(obs)
+    for spec, rec, (model_n, modal), o, ref in zip(problem.recordings, optimum["recs"], models,
+                                                   obs, peak_refs, strict=True):  # fmt: skip
         y_mean, y_std = float(np.mean(o.y)), float(np.std(o.y))
         model = model_n * y_std + y_mean
         r = o.y - model
@@ -498,7 +533,7 @@ def _per_recording(problem: FitProblem, optimum, obs, models, resid):
             "rms_signal": y_std,
             "snr_db": float(20 * np.log10(y_std / max(np.sqrt(np.mean(r**2)), 1e-300))),
             "lag1_autocorr": lag1,
-            "residual_peak": residual_peak(o.t, r, o.y),
+            "residual_peak": residual_peak(o.t, r, o.y, data=ref),
             "selection": o.selection,
             "offset": float(c[0] * y_std + y_mean),
             "drift_per_s": float(c[1] * y_std / max(o.t[-1] - o.t[0], 1e-12)),

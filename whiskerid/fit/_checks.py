@@ -58,8 +58,26 @@ def lag1(r: np.ndarray) -> float:
     return float(np.sum(rc[1:] * rc[:-1]) / max(np.sum(rc**2), 1e-300))
 
 
+def peak_reference(t: np.ndarray, y: np.ndarray | None = None) -> tuple:
+    """What :func:`residual_peak` reads of the recording alone, not of the residuals: the
+    median step, the uniform grid, the window, and with the data ``y`` the rounding floor
+    of its converter and the data's own periodogram (a calibration computes these while
+    its compiled program runs)."""
+    n = np.size(t)
+    dt = float(np.median(np.diff(t)))
+    grid = t[0] + dt * np.arange(n)
+    window = np.hanning(n)
+    if y is None:
+        return dt, grid, window, None, None
+    y = np.asarray(y, dtype=float)
+    step = 2.0 * quantum(y)
+    # the median of an exponential bin of mean q²/12 Σw² is ln 2 times that
+    rounding = np.log(2.0) * step**2 / 12.0 * float(np.sum(window**2))
+    return dt, grid, window, rounding, _periodogram(np.interp(grid, t, y), window)
+
+
 def residual_peak(
-    t: np.ndarray, r: np.ndarray, y: np.ndarray | None = None
+    t: np.ndarray, r: np.ndarray, y: np.ndarray | None = None, *, data: tuple | None = None
 ) -> tuple[float, float] | None:
     """The strongest line left in the residuals as ``(frequency Hz, power / noise floor)``,
     or None when no bin stands out of white noise.
@@ -71,32 +89,27 @@ def residual_peak(
     sits on one code, its residuals are nearly constant and the median would put the floor
     far under the rounding that the data cannot resolve (a clean simulated pluck then showed
     a "line" of a five-hundredth of a code at the record's lowest frequency).
+
+    ``data``: :func:`peak_reference` of ``(t, y)``, when already computed.
     """
     n = r.size
     if n < 64:
         return None
-    dt = float(np.median(np.diff(t)))
-    grid = t[0] + dt * np.arange(n)
-    window = np.hanning(n)
+    dt, grid, window, rounding, p_data = peak_reference(t, y) if data is None else data
     p = _periodogram(np.interp(grid, t, r), window)
     floor = float(np.median(p))
-    if y is not None:
-        y = np.asarray(y, dtype=float)
-        step = 2.0 * quantum(y)
-        # the median of an exponential bin of mean q²/12 Σw² is ln 2 times that
-        floor = max(floor, np.log(2.0) * step**2 / 12.0 * float(np.sum(window**2)))
+    if rounding is not None:
+        floor = max(floor, rounding)
     if floor <= 0:
         return None
     ratio = p / floor  # bin k + 1 is k + 1 cycles in the record
-    if y is not None:
+    if p_data is not None:
         # A line is left by the model only where the residual holds a share of the data's
         # own power at that frequency: an unmodelled mode, a drive or hum is (nearly) all
         # of the data there. A misfit 40 dB under the data at every frequency (a noiseless
         # simulation fitted with fewer modes than made it, whose noise floor is zero) is
         # not a line the data show.
-        ratio = np.where(
-            p >= SIGNAL_SHARE * _periodogram(np.interp(grid, t, y), window), ratio, 0.0
-        )
+        ratio = np.where(p >= SIGNAL_SHARE * p_data, ratio, 0.0)
     i = int(np.argmax(ratio))
     if ratio[i] < (np.log(p.size) + 8.0) / np.log(2.0):
         return None
@@ -174,14 +187,19 @@ def bartlett_meat(scores: np.ndarray, lag: int) -> np.ndarray:
     """
     n, p = scores.shape
     width = int(lag) + 1
+    if width == 1:  # no lag (white residuals, the usual case): Γ_0 itself
+        return scores.T @ scores
     mean = scores.mean(axis=0)
     c = np.zeros((n + 1, p))
     np.cumsum(scores - mean, axis=0, out=c[1:])
-    # window k covers rows max(k, 0) .. min(k + width, n) - 1, for k = -(width-1) .. n-1
-    k = np.arange(-(width - 1), n)
-    lo = np.maximum(k, 0)
-    hi = np.minimum(k + width, n)
-    boxes = c[hi] - c[lo] + (hi - lo)[:, None] * mean
+    # window k covers rows max(k, 0) .. min(k + width, n) - 1, for k = -(width-1) .. n-1:
+    # its ends are c[1..n] then c[n] repeated, less c[0] repeated then c[0..n-1] (slices and
+    # repeats, not a gather of n + L rows by index: a third of a warm fit's score tests)
+    pad = width - 1
+    hi = np.concatenate([c[1:], np.broadcast_to(c[n], (pad, p))]) if pad else c[1:]
+    lo = np.concatenate([np.broadcast_to(c[0], (pad, p)), c[:n]]) if pad else c[:n]
+    counts = np.minimum(np.arange(1, n + width), n) - np.maximum(np.arange(-pad, n), 0)
+    boxes = hi - lo + counts[:, None] * mean
     return boxes.T @ boxes / width
 
 

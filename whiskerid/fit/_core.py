@@ -80,6 +80,7 @@ class CoreResult:
             (mode 1's tip deflection per unit at the sensor), ``mode1`` (the design's two
             mode-1 columns, ``(n, 2)``) and ``dc`` (the design times the linear
             coefficients), so that the test runs in NumPy.
+        meanwhile: What ``fit_problem``'s ``meanwhile`` returned.
     """
 
     value: np.ndarray
@@ -96,6 +97,7 @@ class CoreResult:
     models: list[tuple[np.ndarray, np.ndarray]]
     reported: tuple[np.ndarray, np.ndarray]
     amplitude: dict
+    meanwhile: object = None
 
 
 def fit_problem(
@@ -107,6 +109,7 @@ def fit_problem(
     max_steps: int,
     f1_start_hz: float | None = None,
     start: dict | None = None,
+    meanwhile=None,
 ) -> CoreResult:
     """Start values, least squares, weights, covariance and reported values of ``problem``
     in one compiled program (see the module docstring).
@@ -119,6 +122,8 @@ def fit_problem(
         max_steps: Solver step limit.
         f1_start_hz: Centre of the start search (the record's f_1 when None).
         start: Start parameters instead of the grid search (a parameter pytree).
+        meanwhile: A function of no arguments run while the program runs (JAX returns
+            before the program ends): host work that does not need its results.
     """
     sizes = [r.t.shape[0] for r in problem.recordings]
     padded, masks = _padded(problem)
@@ -128,6 +133,7 @@ def fit_problem(
         first = {"flat0": np.asarray(problem.flatten(start))}
     fn = functools.partial(fit_core, solver=solver, max_steps=max_steps)
     out = cached_call("calibrate", fn, (padded, masks, first), static=(solver, max_steps))
+    extra = meanwhile() if meanwhile is not None else None
     out = {k: np.asarray(v) for k, v in out.items()}
     rows = _rows(sizes, [m.size for m in masks], out["resid"].size)
     weights = [np.asarray(w) for w in out["weights"]]
@@ -154,6 +160,7 @@ def fit_problem(
             "mode1": [out[f"mode1_{i}"][:n] for i, n in enumerate(sizes)],
             "dc": [out[f"dc_{i}"][:n] for i, n in enumerate(sizes)],
         },
+        meanwhile=extra,
     )
 
 

@@ -7,8 +7,8 @@ result is the average of its input over the conversion period; the average of ``
 over the offsets ``o_k`` is ``e^{λt}`` times the constant ``A = mean_k e^{λ o_k}``, so the
 averaged columns cost one evaluation per sample, not one per offset.
 
-Used by the calibration's design, the posterior's log-density (there with the fast
-:func:`whiskerid.posterior._trig.sincos`) and the per-window fits.
+Used by the calibration's design and the posterior's log-density (both with the fast
+:func:`whiskerid.fit.sincos`) and the per-window fits.
 """
 
 import functools

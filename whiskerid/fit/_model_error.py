@@ -50,8 +50,8 @@ def _subset_statistics(lin, r, zs, sizes, known=None):
         idx = tuple(j for j in range(zs.shape[1]) if mask >> j & 1)
         if idx in out:
             continue
-        z, zp = zs[:, idx], zp_all[:, idx]
-        _, _, r_alt = lin.gauss_newton(r, z, zp)
+        zp = zp_all[:, idx]
+        _, r_alt = lin.alternative(r, zp)
         out[idx] = (_score(zp, r, r_alt, sizes)["statistic"], r_alt)
     return out
 

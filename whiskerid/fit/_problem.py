@@ -21,6 +21,8 @@ observables, number of modes and columns, whether averaging is on) is static. A 
 function of a problem therefore compiles once per structure and shape, not once per whisker.
 """
 
+import functools
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -41,6 +43,7 @@ from ..model import (
 from . import _lsq as _lsq
 from ._decay import decay_rates, free_decay_columns
 from ._observation import CalibrationError, Observation, StaticTest, nominal_gain
+from ._trig import sincos
 
 ZETA_MAX = 0.95
 
@@ -166,7 +169,9 @@ class FitProblem(eqx.Module):
         roots = None
         if static is None:
             roots = cantilever_roots(float(nominal.mu), int(n_modes))
-        f64 = lambda x: jnp.asarray(float(x))  # noqa: E731
+        # NumPy leaves: each jnp.asarray of a host number is a device transfer of its own
+        # (tens of µs, a dozen per problem); a jitted program takes either alike
+        f64 = lambda x: np.asarray(float(x))  # noqa: E731
         return cls(
             recordings=tuple(recs),
             static_test=static_model,
@@ -435,7 +440,9 @@ def recording_design(rec: RecordingModel, w: Whisker, rec_params: dict, *, profi
     span = jnp.maximum(t[-1] - t[0], 1e-12)
     cols = [jnp.ones_like(t)[:, None], ((t - 0.5 * (t[0] + t[-1])) / span)[:, None]]
     sigma, wd = decay_rates(w.omega_rad_s, w.zeta)
-    cols.extend(free_decay_columns(t[:, None], sigma, wd, rec.avg_offsets))
+    # the vectorised sin/cos (module _trig): XLA's are a scalar call per element, most of the
+    # cost of every design the start search, the solver and the Jacobian evaluate
+    cols.extend(free_decay_columns(t[:, None], sigma, wd, rec.avg_offsets, sincos=sincos))
     fixed = jnp.zeros_like(t)
     scale = rec.scale  # physical → normalised observed units (gain / std of y)
     if rec.excitation == "sine":
@@ -461,6 +468,14 @@ def recording_design(rec: RecordingModel, w: Whisker, rec_params: dict, *, profi
 
 
 # --------------------------------------------------------------------------- building
+@functools.lru_cache(maxsize=8)
+def _averaging_offsets(adc) -> np.ndarray:
+    """The converter's averaging offsets (s) as a host array, once per converter model."""
+    out = np.asarray(adc.averaging_offsets(), dtype=float)
+    out.setflags(write=False)
+    return out
+
+
 def _recording_model(record, o: Observation, n_modes: int) -> RecordingModel:
     forced = "none"
     if o.excitation in ("sine", "base"):
@@ -469,7 +484,7 @@ def _recording_model(record, o: Observation, n_modes: int) -> RecordingModel:
     n_extra = {"none": 0, "known": 0, "free": 2 if o.excitation == "sine" else 1}[forced]
     avg = None
     if o.observable == "adc":
-        avg = jnp.asarray(np.asarray(record.adc.averaging_offsets(), dtype=float))
+        avg = _averaging_offsets(record.adc)
     x_m = record.sensor_position_m if o.x_m is None else float(o.x_m)
     if not 0 <= x_m <= record.structure.length_m:
         raise CalibrationError(f"{o.name}: sensor position {x_m} m is not on the beam")
@@ -477,17 +492,17 @@ def _recording_model(record, o: Observation, n_modes: int) -> RecordingModel:
     if not y_std > 0:
         raise CalibrationError(f"{o.name}: the signal is constant")
     gain = o.gain if o.gain is not None else nominal_gain(record, o.observable)
-    # device_put, not jnp.asarray: the latter compiles a small program per recording length
+    f64 = functools.partial(np.asarray, dtype=float)  # host leaves (see from_observations)
     return RecordingModel(
-        t=jax.device_put(o.t - o.t[0]),
-        y=jax.device_put((o.y - y_mean) / y_std),
-        weight=jnp.asarray(1.0),
-        scale=jnp.asarray(gain / y_std),
-        hb_m=jnp.asarray(o.hb_m if o.hb_m is not None else 1e-3),
-        x_m=jnp.asarray(float(x_m)),
-        fb_hz=jnp.asarray(float(o.fb_hz or 0.0)),
+        t=f64(o.t - o.t[0]),
+        y=f64((o.y - y_mean) / y_std),
+        weight=f64(1.0),
+        scale=f64(gain / y_std),
+        hb_m=f64(o.hb_m if o.hb_m is not None else 1e-3),
+        x_m=f64(float(x_m)),
+        fb_hz=f64(float(o.fb_hz or 0.0)),
         avg_offsets=avg,
-        base_acc=None if o.excitation != "base" else jnp.asarray(o.base_acc),
+        base_acc=None if o.excitation != "base" else f64(o.base_acc),
         excitation=o.excitation,
         observable=o.observable,
         forced=forced,

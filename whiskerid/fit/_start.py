@@ -53,32 +53,46 @@ def envelope_zeta(t: np.ndarray, y: np.ndarray, f_obs_hz: float, f_true_hz: floa
     RMS over consecutive windows of about four periods of the observed (possibly aliased)
     frequency; windows near the noise floor are dropped; ``ζ = −slope/(2π f)``.
     """
-    y = y - np.median(y)
-    span = t[-1] - t[0]
-    win = max(4.0 / max(f_obs_hz, 1e-9), 12 * float(np.median(np.diff(t))))
-    n_win = int(span // win)
-    if n_win < 3:
-        return None
-    edges = t[0] + win * np.arange(n_win + 1)
-    idx = np.searchsorted(t, edges)
-    # each window's mean square from cumulative sums (a loop over windows took milliseconds)
-    sums = np.concatenate([[0.0], np.cumsum(y**2)])
-    count = np.diff(idx)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        rms = np.where(count > 0, np.sqrt(np.maximum(np.diff(sums[idx]), 0.0) / count), np.nan)
-    mid = 0.5 * (edges[:-1] + edges[1:])
-    floor = np.nanmin(rms)
-    keep = np.isfinite(rms) & (rms > 4 * floor)
-    # Use only the first run of windows above the floor (the decay, not later noise bumps).
-    if keep.sum() < 2:
-        return None
-    first = np.flatnonzero(keep)
-    run = first[: np.argmax(np.diff(np.concatenate([first, [first[-1] + 2]])) > 1) + 1]
-    if run.size < 2:
-        return None
-    slope = np.polyfit(mid[run], np.log(rms[run]), 1)[0]
-    zeta = -slope / (2 * np.pi * f_true_hz)
-    return float(np.clip(zeta, 1e-4, 0.5)) if np.isfinite(zeta) else None
+    return _Envelope(t, y - np.median(y)).zeta(f_obs_hz, f_true_hz)
+
+
+class _Envelope:
+    """:func:`envelope_zeta` of one recording ``(t, y)`` (``y`` less its median), with what
+    does not depend on the frequency (the cumulative squares, the median step) computed
+    once for all of its spectral peaks."""
+
+    def __init__(self, t: np.ndarray, y: np.ndarray):
+        self.t = t
+        self.span = t[-1] - t[0]
+        self.dt = float(np.median(np.diff(t)))
+        self.sums = np.concatenate([[0.0], np.cumsum(y**2)])
+
+    def zeta(self, f_obs_hz: float, f_true_hz: float) -> float | None:
+        t, span = self.t, self.span
+        win = max(4.0 / max(f_obs_hz, 1e-9), 12 * self.dt)
+        n_win = int(span // win)
+        if n_win < 3:
+            return None
+        edges = t[0] + win * np.arange(n_win + 1)
+        idx = np.searchsorted(t, edges)
+        # each window's mean square from cumulative sums (a loop over windows took ms)
+        sums = self.sums
+        count = np.diff(idx)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            rms = np.where(count > 0, np.sqrt(np.maximum(np.diff(sums[idx]), 0.0) / count), np.nan)
+        mid = 0.5 * (edges[:-1] + edges[1:])
+        floor = np.nanmin(rms)
+        keep = np.isfinite(rms) & (rms > 4 * floor)
+        # Use only the first run of windows above the floor (the decay, not later noise bumps).
+        if keep.sum() < 2:
+            return None
+        first = np.flatnonzero(keep)
+        run = first[: np.argmax(np.diff(np.concatenate([first, [first[-1] + 2]])) > 1) + 1]
+        if run.size < 2:
+            return None
+        slope = np.polyfit(mid[run], np.log(rms[run]), 1)[0]
+        zeta = -slope / (2 * np.pi * f_true_hz)
+        return float(np.clip(zeta, 1e-4, 0.5)) if np.isfinite(zeta) else None
 
 
 # --------------------------------------------------------------------------- start grid
@@ -191,18 +205,29 @@ def start_grid(
         ei = (x**2 * (3 * l - x) / 6) / fit[1] if fit[1] > 0 else float(nominal.EI)
         log_ei, d0 = math.log(ei), float(fit[0])
     return {
-        "log_kappa": np.pad(np.log(_kappa_from_f1(nominal, f_cands)), (0, pad_f), mode="edge"),
-        "f_hz": np.pad(f_cands, (0, pad_f), mode="edge"),
-        "f_valid": np.pad(np.ones(f_cands.size), (0, pad_f)),
-        "zeta1": np.pad(np.clip(np.asarray(zeta1), 1e-4, 0.5), ((0, pad_f), (0, 0)), mode="edge"),
-        "zeta": np.pad(z_cands, (0, pad_z), mode="edge"),
-        "z_valid": np.pad(np.ones(z_cands.size), (0, pad_z)),
+        "log_kappa": _pad_edge(np.log(_kappa_from_f1(nominal, f_cands)), pad_f),
+        "f_hz": _pad_edge(f_cands, pad_f),
+        "f_valid": _valid(f_cands.size, pad_f),
+        "zeta1": _pad_edge(np.clip(np.asarray(zeta1), 1e-4, 0.5), pad_f),
+        "zeta": _pad_edge(z_cands, pad_z),
+        "z_valid": _valid(z_cands.size, pad_z),
         "f_ref_hz": np.asarray(f1_nom),
         "nyquist_hz": np.asarray(nyquist),
         "prefer_baseband": np.asarray(0.0 if f1_hz else 1.0),
         "log_ei": np.asarray(log_ei),
         "static_d0": np.asarray(d0),
     }
+
+
+def _pad_edge(x: np.ndarray, pad: int) -> np.ndarray:
+    """``x`` with its last row repeated ``pad`` times (``np.pad``'s edge mode along the first
+    axis, without its tenths of a millisecond of set-up per call)."""
+    return np.concatenate([x, np.repeat(x[-1:], pad, axis=0)]) if pad else x
+
+
+def _valid(n: int, pad: int) -> np.ndarray:
+    """``n`` ones then ``pad`` zeros."""
+    return np.concatenate([np.ones(n), np.zeros(pad)])
 
 
 def _spectral_candidates(observations, f1_nom, lo, hi):
@@ -226,12 +251,13 @@ def _spectral_candidates(observations, f1_nom, lo, hi):
         nyquist = rate / 2 if not np.isfinite(nyquist) else max(nyquist, rate / 2)
         first = True  # the recording's decay rate: its largest peak's (the envelope is the
         # whole signal's RMS, over windows of four periods: a weak low line's are too long)
+        envelope = _Envelope(o.t, yc)
         for fp in _unique(peaks):
             # the alias nearest the nominal, and the line itself (below the Nyquist frequency)
             f_true = unalias(fp, rate, f1_nom)
             sigma = None
             if lo <= f_true <= hi:
-                z = envelope_zeta(o.t, o.y, fp, f_true)
+                z = envelope.zeta(fp, f_true)
                 sigma = None if z is None else z * 2 * np.pi * f_true
                 if sigma is not None and first:
                     rates.append(sigma)

@@ -8,8 +8,7 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
-from ..fit import conversion_average, decay_rates
-from ._trig import sincos
+from ..fit import conversion_average, decay_rates, sincos
 
 # direct columns' own rounding, from the argument ω t, is ~|ω t| · 1e-16, larger).
 _TAYLOR_TOL = 1e-15

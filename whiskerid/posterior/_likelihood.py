@@ -18,11 +18,11 @@ from ..fit import (
     decay_rates,
     free_decay_columns,
     recording_design,
+    sincos,
     to_interval,
 )
 from ._grid import _decay_tables, _grid_columns, _taylor_radius
 from ._prior import prior_logpdf
-from ._trig import sincos
 
 
 # --------------------------------------------------------------------------- model

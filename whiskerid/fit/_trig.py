@@ -2,7 +2,9 @@
 
 XLA's float64 ``sin``/``cos`` on the CPU cost about 20 ns per element (a scalar library
 call with its own range reduction each), twenty times its vectorised ``exp``; in the
-posterior's free-decay columns they were most of a log-probability evaluation. This is
+free-decay columns they were most of a log-probability evaluation of the posterior, and
+half of a warm calibration's compiled program (its start search, solver and Jacobian:
+11 ms of CPU with them, 6.7 ms with these, on a 2000-sample pluck). This is
 the classic fdlibm scheme written in array operations, which XLA fuses and vectorises:
 
 * range reduction ``x = k π/2 + r``, ``|r| ≤ π/4``, by Cody–Waite with π/2 split into
