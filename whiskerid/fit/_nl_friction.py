@@ -50,6 +50,8 @@ def friction_stop(mode, t, a, psi):
         ``(a, held, hold)``: the envelope continued to the stop and 0 after it, the mask of
         held samples, and the held deflection (m at the tip; 0 before the stop).
     """
+    # a host array (the problem's leaves are NumPy) cannot be indexed by a traced index
+    t = jnp.asarray(t)
     n = t.size
     alive = a > 0
     last = jnp.maximum(jnp.sum(alive) - 1, 0)
