@@ -245,11 +245,13 @@ class SamplingProcess:
         is killed); idempotent."""
         proc = self._proc
         if proc.stdin is not None and not proc.stdin.closed:
-            try:
+            # A child that has already ended breaks the pipe: the write fails, and so does the
+            # close's flush of "stop", which still closes the pipe (left open, the collector
+            # would close it later and fail in whatever code runs then).
+            with contextlib.suppress(OSError):
                 proc.stdin.write("stop\n")
+            with contextlib.suppress(OSError):
                 proc.stdin.close()
-            except OSError:  # already gone
-                pass
         deadline = time.monotonic() + timeout_s
         while not self._ended and time.monotonic() < deadline:
             try:

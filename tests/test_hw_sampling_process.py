@@ -43,6 +43,17 @@ def test_the_child_replays_the_recording_on_schedule(slow_sine):
     assert [s.channel for s in got] == [0] * len(got)
 
 
+def test_close_after_the_child_ended_closes_its_pipes(slow_sine):
+    """A child that has ended breaks the pipe: ``close`` still closes both ends (a pipe left
+    open fails later, in whatever code runs when the collector closes it)."""
+    path, _, _ = slow_sine
+    proc = hw.SamplingProcess(hw.SamplerSpec(replay=str(path), rate_hz=200.0, duration_s=0.2))
+    assert list(proc)
+    assert proc._proc.wait(timeout=30) == 0  # gone: the pipe to it is broken
+    proc.close()
+    assert proc._proc.stdin.closed and proc._proc.stdout.closed
+
+
 def test_close_stops_the_child_and_brings_back_its_counters(slow_sine):
     path, _, _ = slow_sine
     proc = hw.SamplingProcess(hw.SamplerSpec(replay=str(path), rate_hz=200.0))  # no end
