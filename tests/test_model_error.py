@@ -98,3 +98,19 @@ def test_a_strongly_damped_linear_pluck_is_not_amplitude_dependent():
     assert "amplitude-dependent" not in cal.checks, test
     assert test["nonlinear"]["hac_lag"] == 0 and test["nonlinear"]["p_value"] > 1e-2
     assert abs(cal.params["zeta"]["value"] - zeta) < 3 * cal.params["zeta"]["std"]
+
+
+def test_a_score_column_the_fit_spans_is_left_out_not_a_singular_variance():
+    """A fit to noise can leave an amplitude column that the fit's Jacobian spans (zero once
+    projected): the score test is the one of the other columns (it raised LinAlgError)."""
+    from whiskerid.fit._amplitude import _score
+
+    rng = np.random.default_rng(0)
+    n = 200
+    zp = np.stack([rng.normal(size=n), np.zeros(n), rng.normal(size=n)], axis=1)
+    r = rng.normal(size=n) + 0.2 * zp[:, 0]
+    out, ref = _score(zp, r, r, [n]), _score(zp[:, [0, 2]], r, r, [n])
+    assert out["dof"] == ref["dof"] == 2
+    assert out["statistic"] == pytest.approx(ref["statistic"], rel=1e-12) and ref["statistic"] > 0
+    none = _score(np.zeros((n, 2)), r, r, [n])
+    assert (none["dof"], none["statistic"], none["p_value"]) == (0, 0.0, 1.0)

@@ -250,9 +250,15 @@ def _score(zp, r, r_alt, sizes):
     corr = meat / np.outer(sd, sd)
     v = corr * np.sqrt(np.outer(v, v))
     s = zp.T @ r
-    stat = float(s @ np.linalg.solve(v, s))
-    k = zp.shape[1]
-    return {"statistic": stat, "dof": k, "p_value": chi2_sf(stat, k), "hac_lag": lag}
+    # a column the fit's own Jacobian spans (zero once projected: e.g. an envelope that is
+    # zero where a fit to noise put ζ at its bound) carries no information: left out, not a
+    # singular variance (it was a LinAlgError)
+    keep = np.diag(v) > 0
+    v, s = v[np.ix_(keep, keep)], s[keep]
+    k = int(keep.sum())
+    stat = float(s @ np.linalg.solve(v, s)) if k else 0.0
+    p_value = chi2_sf(stat, k) if k else 1.0
+    return {"statistic": stat, "dof": k, "p_value": p_value, "hac_lag": lag}
 
 
 def _found(cal, opt, out, info, test: str):
@@ -263,7 +269,7 @@ def _found(cal, opt, out, info, test: str):
     res = out[test]
     lin = res["linear_step"]
     u = float(np.ravel(opt["zeta_u"] + lin["zeta_u"])[0])
-    zeta0 = ZETA_MAX / (1.0 + np.exp(-u))  # the problem's to_interval(u, 0, ZETA_MAX)
+    zeta0 = ZETA_MAX * 0.5 * (1.0 + np.tanh(0.5 * u))  # to_interval(u, 0, ZETA_MAX), no overflow
     f0 = f1 * float(np.exp(0.5 * np.ravel(lin["log_kappa"])[0]))
     if test == "nonlinear":
         g, zv, zc = res["step"]
