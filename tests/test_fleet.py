@@ -135,14 +135,20 @@ def test_batched_plucks_match_calibrate_and_a_bad_one_fails_alone(fleet):
         assert fit.f1_std == pytest.approx(white, rel=1e-4)
 
 
-@pytest.mark.slow  # the noise's lane takes ten times the steps, and every lane waits for it
+@pytest.mark.slow  # a noise lane takes up to ten times the steps, and every lane waits for it
 def test_a_fit_to_noise_gets_the_verdict_of_calibrate_beside_a_good_one(fleet):
     record, good = _plucks(fleet["root"], "whisker-002", ["session-00"])
-    noise = dataclasses.replace(good[0], y=np.random.default_rng(3).normal(size=good[0].y.size),
-                                name="noise")  # fmt: skip
-    fit_good, fit_noise = calibrate_each([(record, good[0]), (record, noise)])
-    assert fit_noise.status == calibrate(record, [noise]).status
-    assert fit_noise.status not in ("ok", "check")
+    # seeds 5 and 7 drive ζ to its bound: a solver other than calibrate's ran out of steps
+    # there ("not converged") where calibrate stops and says "poor fit"
+    seeds = (3, 5, 7, 9)
+    y = [np.random.default_rng(seed).normal(size=good[0].y.size) for seed in seeds]
+    noises = [
+        dataclasses.replace(good[0], y=v, name=f"noise-{k}") for k, v in zip(seeds, y, strict=True)
+    ]
+    fit_good, *fits = calibrate_each([(record, good[0])] + [(record, n) for n in noises])
+    for noise, fit in zip(noises, fits, strict=True):
+        assert fit.status == calibrate(record, [noise]).status, noise.name
+        assert fit.status not in ("ok", "check"), noise.name
     assert fit_good.f1_hz == pytest.approx(calibrate(record, [good[0]]).params["f1_hz"]["value"],
                                            rel=1e-7)  # fmt: skip
 

@@ -3,20 +3,21 @@
 A fleet records the same kind of pluck on many whiskers: each pluck's fit is the same
 program on other numbers (a :class:`whiskerid.fit.FitProblem`'s whisker, sensor and data are
 traced leaves), so the fits of one shape are stacked along a leading axis and solved together
-by ``vmap`` of the least squares, from the start values :func:`whiskerid.fit.calibrate` would
-use (:func:`whiskerid.fit.start_values`). A batch has a fixed number of lanes (the last one
+by ``vmap`` of calibrate's own least squares (the same solver, tolerances and convergence
+tests: module ``_core``'s ``solve``), from the start values :func:`whiskerid.fit.calibrate`
+would use (:func:`whiskerid.fit.start_values`). A batch has a fixed number of lanes (the last one
 filled with copies of its last fit) so that one program serves every batch of a shape.
 
-Each fit gets its own status, decided as :func:`whiskerid.fit.calibrate` decides it: a fit
-that fails to converge or gives non-finite numbers marks only its own lane. Only the values
-that change detection needs are kept (f_1, ζ and their 1σ from ``s²(JᵀJ)⁻¹``); the status
-follows calibrate's rules: ``ok`` when converged with a finite covariance, ``poor fit`` when
-the model explains little of the signal, ``check`` when one of calibrate's checks of a
-converged fit fails (correlated residuals, a line left in them, ζ at a bound or implausible,
-f_1 far from the record's, imprecise values, mode 1 silent). Unlike calibrate, the fit is
-not solved a second time after the recording's residual scale is known: for one recording
-that scale is one factor on every residual, which leaves the optimum and ``s²(JᵀJ)⁻¹``
-unchanged.
+Each fit gets its own status, decided by calibrate's own rules (module ``_core``'s
+``solve_status``, then ``_calibrate``'s ``fit_status``): a fit that fails to converge or gives
+non-finite numbers marks only its own lane; ``ok`` when converged with a finite covariance,
+``poor fit`` when the model explains little of the signal, else ``check`` when one of
+calibrate's checks of the converged fit fails (correlated residuals, a line left in them, ζ
+at a bound or implausible, f_1 far from the record's, imprecise values, mode 1 silent). Only
+the values that change detection needs are kept (f_1, ζ and their 1σ from ``s²(JᵀJ)⁻¹``).
+Unlike calibrate, the fit is not solved a second time after the recording's residual scale
+is known: for one recording that scale is one factor on every residual, which leaves the
+optimum and ``s²(JᵀJ)⁻¹`` unchanged.
 """
 
 from dataclasses import dataclass
@@ -30,8 +31,10 @@ import numpy as np
 from .._choices import PINS
 from ..model import WhiskerRecord
 from . import _lsq as _lsq
-from ._calibrate import GTOL, POOR_FIT_SNR_DB
+from ._calibrate import _poor_fit_warnings as poor_fit_warnings
+from ._calibrate import fit_status
 from ._checks import check_fit, decay_rates, lag1, residual_peak
+from ._core import solve, solve_status
 from ._observation import CalibrationError, Observation
 from ._problem import FitProblem, _flat_residuals, reported_names
 from ._start import start_values
@@ -153,27 +156,25 @@ def calibrate_each(
 @eqx.filter_jit
 def _fit_batch(problems, flat0, solver, max_steps):
     def one(problem, y0):
-        res = _lsq.least_squares(_flat_residuals, y0, problem,
-                                 solver=_lsq.make_solver(solver), max_steps=max_steps)  # fmt: skip
-        resid, jac = (
-            _flat_residuals(res.value, problem),
-            jax.jacfwd(_flat_residuals)(res.value, problem),
-        )
-        cov = _lsq.residual_variance(resid, res.value.size) * _lsq.scaled_inverse_gram(jac)
+        # calibrate's own solve (same solver, tolerances and tests): no padding rows
+        masks = [jnp.ones(r.t.shape[0]) for r in problem.recordings]
+        value, ok, steps = solve(problem, masks, y0, solver=solver, max_steps=max_steps)
+        resid, jac = _flat_residuals(value, problem), jax.jacfwd(_flat_residuals)(value, problem)
+        cov = _lsq.residual_variance(resid, value.size) * _lsq.scaled_inverse_gram(jac)
 
         def reported(flat):
             return jnp.stack(list(problem.reported(problem.unflatten(flat)).values()))
 
-        rjac = jax.jacfwd(reported)(res.value)
-        ((design, fixed),) = problem.design(problem.unflatten(res.value))
+        rjac = jax.jacfwd(reported)(value)
+        ((design, fixed),) = problem.design(problem.unflatten(value))
         return {
-            "value": res.value,
-            "ok": res.ok,
-            "steps": res.steps,
-            "cost": res.cost,
+            "value": value,
+            "ok": ok,
+            "steps": steps,
+            "cost": 0.5 * jnp.sum(resid**2),
             "gcos": _lsq.gradient_cosine_from(jac, resid),
             "cov_diag": jnp.diag(cov),
-            "reported": reported(res.value),
+            "reported": reported(value),
             "reported_var": jnp.einsum("ij,jk,ik->i", rjac, cov, rjac),
             "design": design,
             "fixed": fixed,
@@ -184,21 +185,16 @@ def _fit_batch(problems, flat0, solver, max_steps):
 
 def _pluck_fit(problem: FitProblem, obs: Observation, b: dict, names, f1_nominal) -> PluckFit:
     """One lane of a batch as calibrate would judge it (see the module docstring)."""
-    converged = bool(b["ok"]) or float(b["gcos"]) < GTOL
-    ok = converged and bool(np.all(np.isfinite(b["cov_diag"])))
-    status = "ok" if ok else ("non-finite" if not np.isfinite(b["cost"]) else "not converged")
+    status, ok = solve_status(b["ok"], float(b["gcos"]), b["cov_diag"], float(b["cost"]))
     optimum = problem.unflatten(jnp.asarray(b["value"]))
     std = np.sqrt(np.maximum(b["reported_var"], 0.0))
     params = {n: {"value": float(v), "std": float(s)}
               for n, v, s in zip(names, b["reported"], std, strict=True)}  # fmt: skip
     checks: dict = {}
-    if ok:
+    if ok:  # calibrate's rule (fit_status): a poor fit first, else its checks' verdict
         per_rec = _recording_diagnostics(problem, obs, b, np.asarray(optimum["recs"][0]["c"]))
-        if not per_rec["snr_db"] >= POOR_FIT_SNR_DB:
-            status = "poor fit"
-        else:
-            checks = check_fit(params, [per_rec], f1_nominal, decay_rates_hz=decay_rates([obs]))
-            status = "check" if checks else "ok"
+        checks = check_fit(params, [per_rec], f1_nominal, decay_rates_hz=decay_rates([obs]))
+        status, _ = fit_status(status, ok, poor_fit_warnings([per_rec]), checks)
     return PluckFit(
         status=status,
         f1_hz=params["f1_hz"]["value"],

@@ -60,15 +60,13 @@ from ._checks import (
     robust_covariance,
 )
 from ._checks import lag1 as lag1_autocorr
-from ._core import fit_problem
+from ._core import GTOL as GTOL
+from ._core import fit_problem, solve_status
 from ._modulus import MODULUS_TOLERANCE, check_tolerance, modulus_covariance
 from ._observation import CalibrationError, Observation, StaticTest
 from ._problem import FitProblem, reported_names
 from ._threads import single_blas_thread
 
-#: A fit is converged when the solver says so, or when no parameter direction has a cosine
-#: with the residuals above this (MINPACK's ``gtol``).
-GTOL = 1e-6
 #: Samples larger than this (in any units) are refused: their squares and sums overflow.
 MAX_SAMPLE = 1e100
 
@@ -275,9 +273,7 @@ def calibrate(
     # rounding level on long real recordings (timestamps rounded to 1 µs: the same optimum,
     # 400 steps); MINPACK's gradient test says whether the point is stationary anyway.
     gcos = res.gcos
-    converged = bool(res.ok) or gcos < GTOL
-    ok = converged and bool(np.all(np.isfinite(np.diag(cov))))
-    status = "ok" if ok else ("non-finite" if not np.isfinite(float(res.cost)) else "not converged")
+    status, ok = solve_status(res.ok, gcos, np.diag(cov), res.cost)
 
     optimum = res.optimum
     per_rec, curves, resid = _per_recording(problem, optimum, obs, res.models, resid_w,

@@ -41,6 +41,9 @@ _BUCKET_STEPS = (1.0, 1.25, 1.5, 1.75)
 #: only add steps at rounding level (a 2000-sample pluck: 10 steps at 1e-8, 13 to 24 at
 #: 1e-10, to the same optimum within 1e-16); 1e-8 of f_1 is far below its 1σ.
 RTOL, ATOL = 1e-8, 1e-10
+#: A fit is converged when the solver says so, or when no parameter direction has a cosine
+#: with the residuals above this (MINPACK's ``gtol``).
+GTOL = 1e-6
 
 
 def bucket(n: int) -> int:
@@ -203,6 +206,44 @@ def _rows(sizes, padded_sizes, total) -> np.ndarray:
     return np.concatenate(idx)
 
 
+def solve(problem: FitProblem, masks, flat0, *, solver: str, max_steps: int):
+    """The least squares of a calibration, traceable: ``(flat, ok, steps)`` from ``flat0``.
+
+    Levenberg–Marquardt runs by variable projection (module ``_varpro``, over the nonlinear
+    parameters only), the other solvers are optimistix's over every parameter. Calibrate and
+    the batched fits (module ``_batch``) both solve here, so that the same recording from the
+    same start meets the same convergence test in the same number of steps: on a pluck of
+    pure noise, optimistix's LM crawled towards ζ = 0 for its 400 steps (``not converged``)
+    where variable projection stops in tens (``poor fit``).
+
+    Args:
+        problem: The (padded, weighted) fit problem.
+        masks: Per recording, 1 for a sample and 0 for padding.
+        flat0: Start parameters, flat.
+        solver: Least-squares solver name.
+        max_steps: Solver step limit.
+    """
+    if solver == "levenberg-marquardt":
+        return _varpro.least_squares(problem, masks, flat0, max_steps=max_steps)
+    res = _lsq.least_squares(
+        _masked_residuals, flat0, (problem, _mask_vector(problem, masks)),
+        solver=_lsq.make_solver(solver, rtol=RTOL, atol=ATOL), max_steps=max_steps,
+    )  # fmt: skip
+    return res.value, res.ok, res.steps
+
+
+def solve_status(ok, gcos: float, cov_diag, cost: float) -> tuple[str, bool]:
+    """A solve's status before any check of the fit, and whether it is ``ok``: converged
+    (the solver's own test, or MINPACK's gradient test below ``GTOL`` where the solver's
+    stalls at rounding level) with a finite covariance; else ``non-finite`` or
+    ``not converged``. Shared by calibrate and the batched fits."""
+    converged = bool(ok) or gcos < GTOL
+    good = converged and bool(np.all(np.isfinite(cov_diag)))
+    if good:
+        return "ok", True
+    return ("non-finite" if not np.isfinite(float(cost)) else "not converged"), False
+
+
 def _mask_vector(problem, masks):
     parts = list(masks)
     if problem.static_test is not None:
@@ -253,7 +294,6 @@ def fit_core(problem: FitProblem, masks, first: dict, *, solver: str, max_steps:
     else:
         flat0 = problem.flatten(start_from_grid(problem, first, masks))
     mask = _mask_vector(problem, masks)
-    lsq = _lsq.make_solver(solver, rtol=RTOL, atol=ATOL)
     # One block (a recording, no static test): its weight is one factor on every residual,
     # which moves neither the optimum nor s²(JᵀJ)⁻¹, so one solve; more blocks are solved
     # again with each weighted by its own residual scale, so that they combine fairly.
@@ -261,16 +301,8 @@ def fit_core(problem: FitProblem, masks, first: dict, *, solver: str, max_steps:
 
     def one_pass(carry, _):
         flat, weights = carry
-        if solver == "levenberg-marquardt":  # over the nonlinear parameters only
-            value, ok, steps = _varpro.least_squares(
-                _weighted(problem, weights), masks, flat, max_steps=max_steps
-            )
-        else:
-            res = _lsq.least_squares(
-                _masked_residuals, flat, (_weighted(problem, weights), mask), solver=lsq,
-                max_steps=max_steps,
-            )  # fmt: skip
-            value, ok, steps = res.value, res.ok, res.steps
+        value, ok, steps = solve(_weighted(problem, weights), masks, flat, solver=solver,
+                                 max_steps=max_steps)  # fmt: skip
         new = _block_weights(problem, problem.unflatten(value), masks)
         return (value, new), (ok, steps)
 
