@@ -36,23 +36,30 @@ import numpy as np
 
 from ._core import unflatten_numpy
 from ._problem import ZETA_MAX
-from ._projector import LinearPart, pinv_columns
+from ._projector import ColumnSubsets, LinearPart, pinv_columns
 
 
 def _subset_statistics(lin, r, zs, sizes, known=None):
     """``{subset: (T_S, residuals after the Gauss–Newton step with S)}`` over every
     non-empty subset of the columns of ``zs`` (``known``: subsets already computed)."""
-    from ._amplitude import _score
+    from ._amplitude import _score, test_lags
 
     out = dict(known or {})
-    zp_all = lin.project(zs)  # column by column, so each subset's Z⊥ is its columns of it
-    for mask in range(1, 2 ** zs.shape[1]):
-        idx = tuple(j for j in range(zs.shape[1]) if mask >> j & 1)
-        if idx in out:
-            continue
-        zp = zp_all[:, idx]
-        _, r_alt = lin.alternative(r, zp)
-        out[idx] = (_score(zp, r, r_alt, sizes)["statistic"], r_alt)
+    # column by column, so each subset's Z⊥ is its columns of it; factored once for all
+    subsets = ColumnSubsets(lin.project(zs))
+    todo = [idx for idx in (tuple(j for j in range(zs.shape[1]) if mask >> j & 1)
+                            for mask in range(1, 2 ** zs.shape[1])) if idx not in out]  # fmt: skip
+    if not todo:
+        return out
+    # as LinearPart.alternative: the residuals each subset's step leaves
+    r_alts = np.stack([lin.off(r) - subsets.zp[:, idx] @ subsets.step(idx, r) for idx in todo])
+    lags, start = [], 0  # each recording's lags, all subsets at once
+    for n in sizes:
+        lags.append(test_lags(r_alts[:, start : start + n]))
+        start += n
+    for k, idx in enumerate(todo):
+        stat = _score(subsets.zp[:, idx], r, r_alts[k], sizes, [lag[k] for lag in lags])
+        out[idx] = (stat["statistic"], r_alts[k])
     return out
 
 
