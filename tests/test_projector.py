@@ -3,8 +3,10 @@ the joint least-squares solve's, which the score tests used to compute one by on
 
 import numpy as np
 
+from whiskerid.fit._amplitude import test_lags as lags_of
+from whiskerid.fit._checks import lag_below
 from whiskerid.fit._model_error import step_map
-from whiskerid.fit._projector import LinearPart
+from whiskerid.fit._projector import ColumnSubsets, LinearPart, pinv_columns
 
 
 def _problem(seed=0, n=400, p=6, k=3):
@@ -41,3 +43,30 @@ def test_step_map_gives_the_joint_step_of_chosen_parameters_for_residuals_off_J(
     a = np.concatenate([jac, z], axis=1)
     joint = np.linalg.lstsq(a, -r, rcond=None)[0]
     np.testing.assert_allclose(step_map(jac, z, idx).T @ r, joint[idx], rtol=1e-8)
+
+
+def test_each_subsets_step_from_one_qr_is_its_own_least_squares_step():
+    jac, z, r = _problem(3)
+    # a fourth column nearly the sum of two others: a badly conditioned subset
+    z = np.concatenate([z, (z[:, :1] + z[:, 1:2]) * (1 + 1e-7)], axis=1)
+    zp = LinearPart(jac).project(z)
+    subsets = ColumnSubsets(zp)
+    for idx in [(0,), (2,), (0, 1), (1, 2), (0, 1, 2), (0, 1, 3), (0, 1, 2, 3)]:
+        own = pinv_columns(zp[:, idx]) @ r
+        np.testing.assert_allclose(subsets.step(idx, r), own, rtol=1e-7, atol=0)
+        scale = np.linalg.norm(zp[:, idx], axis=0)
+        lstsq = np.linalg.lstsq(zp[:, idx] / scale, r, rcond=None)[0] / scale
+        np.testing.assert_allclose(subsets.step(idx, r), lstsq, rtol=1e-7, atol=0)
+
+
+def test_the_lags_of_many_residual_vectors_are_each_ones_own():
+    rng = np.random.default_rng(4)
+    for n in (78, 2048):
+        rows = [rng.standard_normal(n)]  # white: no lag
+        rows += [np.convolve(rng.standard_normal(n), np.ones(w), "same") for w in (2, 5, 9)]
+        rs = np.stack(rows)
+        limit = max(0.1, float(np.sqrt(2.0 * np.log(n) / n)))
+        own = [lag_below(row, limit) for row in rs]
+        want = [0 if lag <= 1 else min(lag, n // 4) for lag in own]
+        assert lags_of(rs) == want
+        assert want[0] == 0 and max(want[1:]) > 1  # both kinds are in the test

@@ -32,7 +32,7 @@ still prefer the nonlinear terms by BIC, keeps ``ok`` with a model-error term in
 
 import numpy as np
 
-from ._checks import bartlett_meat, lag_below
+from ._checks import bartlett_meat
 from ._chi2 import chi2_sf
 from ._core import _padded as padded_problem
 from ._core import unflatten_numpy
@@ -214,27 +214,42 @@ def test_lag(r: np.ndarray) -> int:
     linear pluck (73 Hz, ζ 0.073, white residuals, lag-1 0.02) was rejected at p = 2e-5 with
     19 lags and gave p = 0.27 with none. So the threshold here is the larger of the two;
     residuals a misfit leaves correlated (a nonlinear whisker's) keep their lags."""
-    n = r.size
-    lag = lag_below(r, max(0.1, float(np.sqrt(2.0 * np.log(max(n, 2)) / n))))
+    return test_lags(r[None, :])[0]
+
+
+def test_lags(rs: np.ndarray) -> list[int]:
+    """:func:`test_lag` of each row of ``rs`` (``m × n``), their autocorrelations by one FFT
+    call (the model-error term asks it of six residual vectors of each recording); the
+    same steps as :func:`._checks.lag_below`, row by row."""
+    n = rs.shape[1]
+    limit = max(0.1, float(np.sqrt(2.0 * np.log(max(n, 2)) / n)))
+    rc = rs - rs.mean(axis=1, keepdims=True)
+    f = np.fft.rfft(rc, 2 * n, axis=1)
+    acf = np.fft.irfft(f * np.conj(f), axis=1)[:, :n]
+    acf = acf / np.maximum(acf[:, :1], 1e-300)
+    tail_max = np.maximum.accumulate(np.abs(acf[:, ::-1]), axis=1)[:, ::-1]
+    below = tail_max < limit
+    lags = np.where(below.any(axis=1), below.argmax(axis=1), n)
     # no lag at all where even lag 1 looks white (the fit's rule keeps one)
-    return 0 if lag <= 1 else int(min(lag, n // 4))
+    return [0 if lag <= 1 else int(min(lag, n // 4)) for lag in lags]
 
 
-def score_meat(blocks) -> tuple[np.ndarray, int]:
+def score_meat(blocks, lags=None) -> tuple[np.ndarray, int]:
     """``Σ`` over recordings of the Bartlett (Newey–West) sum of the per-sample scores
     ``Z_t r_t`` to :func:`test_lag` (none where the residuals look white), and the largest
-    lag; blocks are ``(Z, r, _)``."""
+    lag; blocks are ``(Z, r, _)``; ``lags``: their :func:`test_lag`, when already known."""
     meat, most = 0.0, 0
-    for z, r, _ in blocks:
-        lag = test_lag(r)
+    for k, (z, r, _) in enumerate(blocks):
+        lag = test_lag(r) if lags is None else lags[k]
         most = max(most, lag)
         meat = meat + bartlett_meat(z * r[:, None], lag)
     return meat, most
 
 
-def _score(zp, r, r_alt, sizes):
+def _score(zp, r, r_alt, sizes, lags=None):
     """The score statistic of the columns ``zp`` (already projected off ``J``: see
-    :class:`._projector.LinearPart`) at residuals ``r``, its HAC variance from ``r_alt``."""
+    :class:`._projector.LinearPart`) at residuals ``r``, its HAC variance from ``r_alt``
+    (``lags``: :func:`test_lag` of each recording's ``r_alt``, when already known)."""
     scale = np.linalg.norm(zp, axis=0)
     scale = np.where(scale > 0, scale, 1.0)
     zp = zp / scale
@@ -242,7 +257,7 @@ def _score(zp, r, r_alt, sizes):
     for n in sizes:
         blocks.append((zp[start : start + n], r_alt[start : start + n], True))
         start += n
-    meat, lag = score_meat(blocks)
+    meat, lag = score_meat(blocks, lags)
     white = float(np.mean(r_alt**2)) * (zp.T @ zp)
     # never more certain than white noise would make it
     v = np.maximum(np.diag(meat), np.diag(white))

@@ -170,13 +170,32 @@ def fit_problem(
 def unflatten_numpy(problem: FitProblem, flat: np.ndarray) -> dict:
     """:meth:`FitProblem.unflatten` in NumPy (JAX's would compile a few programs in a fresh
     process; the layout is the same: leaves in tree order, each raveled)."""
-    leaves, treedef = jax.tree_util.tree_flatten(problem.zero_params())
+    shapes, treedef = _layout(problem)
     parts, start = [], 0
-    for leaf in leaves:
-        size = int(np.size(leaf))
-        parts.append(np.asarray(flat[start : start + size]).reshape(np.shape(leaf)))
+    for shape in shapes:
+        size = int(np.prod(shape, dtype=int))
+        parts.append(np.asarray(flat[start : start + size]).reshape(shape))
         start += size
     return jax.tree_util.tree_unflatten(treedef, parts)
+
+
+#: The last problems' parameter layouts (a calibration unflattens four times: its optimum,
+#: the score tests' steps, where κ and ζ sit); each entry keeps its problem alive, so that
+#: its ``id`` is not reused while it is here.
+_LAYOUTS: dict[int, tuple] = {}
+
+
+def _layout(problem: FitProblem):
+    """``(leaf shapes, treedef)`` of ``problem.zero_params()``."""
+    hit = _LAYOUTS.get(id(problem))
+    if hit is not None and hit[0] is problem:
+        return hit[1]
+    leaves, treedef = jax.tree_util.tree_flatten(problem.zero_params())
+    layout = ([np.shape(leaf) for leaf in leaves], treedef)
+    if len(_LAYOUTS) >= 8:
+        _LAYOUTS.pop(next(iter(_LAYOUTS)))
+    _LAYOUTS[id(problem)] = (problem, layout)
+    return layout
 
 
 def _padded(problem: FitProblem):

@@ -36,23 +36,35 @@ import numpy as np
 
 from ._core import unflatten_numpy
 from ._problem import ZETA_MAX
-from ._projector import LinearPart, pinv_columns
+from ._projector import ColumnSubsets, LinearPart, pinv_columns
 
 
 def _subset_statistics(lin, r, zs, sizes, known=None):
-    """``{subset: (T_S, residuals after the Gauss–Newton step with S)}`` over every
-    non-empty subset of the columns of ``zs`` (``known``: subsets already computed)."""
-    from ._amplitude import _score
+    """``{subset: (T_S, residuals after the Gauss–Newton step with S, their test lag per
+    recording or None)}`` over every non-empty subset of the columns of ``zs`` (``known``:
+    subsets already computed, ``(T_S, residuals)``)."""
+    from ._amplitude import _score, test_lags
 
-    out = dict(known or {})
-    zp_all = lin.project(zs)  # column by column, so each subset's Z⊥ is its columns of it
-    for mask in range(1, 2 ** zs.shape[1]):
-        idx = tuple(j for j in range(zs.shape[1]) if mask >> j & 1)
-        if idx in out:
-            continue
-        zp = zp_all[:, idx]
-        _, r_alt = lin.alternative(r, zp)
-        out[idx] = (_score(zp, r, r_alt, sizes)["statistic"], r_alt)
+    out = {idx: (stat, r_alt, None) for idx, (stat, r_alt) in (known or {}).items()}
+    # column by column, so each subset's Z⊥ is its columns of it; factored once for all
+    subsets = ColumnSubsets(lin.project(zs))
+    todo = [idx for idx in (tuple(j for j in range(zs.shape[1]) if mask >> j & 1)
+                            for mask in range(1, 2 ** zs.shape[1])) if idx not in out]  # fmt: skip
+    if not todo:
+        return out
+    # as LinearPart.alternative: the residuals each subset's step leaves
+    r_alts = np.stack([lin.off(r) - subsets.zp[:, idx] @ subsets.step(idx, r) for idx in todo])
+    lags, start = [], 0  # each recording's lags, all subsets at once
+    for n in sizes:
+        lags.append(test_lags(r_alts[:, start : start + n]))
+        start += n
+    for k, idx in enumerate(todo):
+        own = [lag[k] for lag in lags]
+        out[idx] = (
+            _score(subsets.zp[:, idx], r, r_alts[k], sizes, own)["statistic"],
+            r_alts[k],
+            own,
+        )
     return out
 
 
@@ -114,7 +126,7 @@ def model_error(cal, jac, r, cols, *, lin=None, known=None) -> dict:
     for m in sizes:
         blocks.append((x[start : start + m], r_alt[start : start + m], True))
         start += m
-    meat, lag = score_meat(blocks)
+    meat, lag = score_meat(blocks, stats[best][2])  # the subset's own lags, when known
     var = np.maximum(np.diag(meat), float(np.mean(r_alt**2)) * np.sum(x**2, axis=0))
     f1 = float(cal.params["f1_hz"]["value"])
     zeta = float(cal.params["zeta"]["value"])

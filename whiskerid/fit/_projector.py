@@ -57,13 +57,34 @@ class LinearPart:
     def alternative(self, r: np.ndarray, zp: np.ndarray):
         """``(δ_Z, r_alt)`` of :meth:`gauss_newton` (without ``δ_J``), from ``zp = Z⊥``."""
         d_z = -pinv_columns(zp) @ r
-        return d_z, self._off(r) + zp @ d_z
+        return d_z, self.off(r) + zp @ d_z
 
-    def _off(self, r: np.ndarray) -> np.ndarray:
+    def off(self, r: np.ndarray) -> np.ndarray:
         """``(I − P_J) r``, kept for the last ``r`` (the tests ask it of one ``r`` nine times)."""
         if self._last is None or self._last[0] is not r:
             self._last = (r, r - self.u @ (self.u.T @ r))
         return self._last[1]
+
+
+class ColumnSubsets:
+    """``Z⊥`` (``n × k``) factored once as ``QR``, for the least-squares step of any subset
+    ``S`` of its columns (the model-error term asks it of all seven).
+
+    ``Z⊥_S = Q R_S`` with ``Q``'s columns orthonormal, so ``Z⊥_S⁺ y = R_S⁺ Qᵀy``: one QR
+    of the ``n × k`` columns and a ``k × |S|`` pseudo-inverse per subset, instead of an
+    ``n × |S|`` SVD each. ``R_S`` has ``Z⊥_S``'s column norms and singular values, so the
+    cut of small singular values is the same (taken relative to ``max(n, |S|)``, as
+    :func:`pinv_columns` takes it).
+    """
+
+    def __init__(self, zp: np.ndarray):
+        self.zp = zp
+        self.q, self.r = np.linalg.qr(zp)
+
+    def step(self, idx, r: np.ndarray) -> np.ndarray:
+        """``Z⊥_S⁺ r`` for the columns ``idx``."""
+        scale, u, s, vt = _scaled_svd(self.r[:, list(idx)], rows=self.zp.shape[0])
+        return (vt.T / s @ (u.T @ (self.q.T @ r))) / scale
 
 
 def pinv_columns(a: np.ndarray) -> np.ndarray:
@@ -73,12 +94,13 @@ def pinv_columns(a: np.ndarray) -> np.ndarray:
     return (vt.T / s @ u.T) / scale[:, None]
 
 
-def _scaled_svd(a: np.ndarray):
+def _scaled_svd(a: np.ndarray, rows: int | None = None):
     """``(scale, U, S, Vᵀ)`` of ``A`` with unit-norm columns (``A = U S Vᵀ diag(scale)``), the
     singular values below ``max(n, p)·ε`` of the largest left out, as
-    :func:`numpy.linalg.lstsq` leaves them out."""
+    :func:`numpy.linalg.lstsq` leaves them out (``n`` = ``rows`` where ``A`` is the ``R``
+    of an ``n``-row matrix)."""
     scale = np.linalg.norm(a, axis=0)
     scale = np.where(scale > 0, scale, 1.0)
     u, s, vt = np.linalg.svd(a / scale, full_matrices=False)
-    keep = s > (s[0] if s.size else 0.0) * max(a.shape) * np.finfo(float).eps
+    keep = s > (s[0] if s.size else 0.0) * max(*a.shape, rows or 0) * np.finfo(float).eps
     return scale, u[:, keep], s[keep], vt[keep]
