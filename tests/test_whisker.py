@@ -138,3 +138,25 @@ def test_missing_and_garbled_files(tmp_path):
     (tmp_path / "x.toml").write_text("this is = = not toml")
     with pytest.raises(wi.RecordError, match="TOML"):
         wi.load_record(tmp_path / "x.toml")
+
+
+@pytest.mark.parametrize("n_modes", [1, 2, 4])
+@pytest.mark.parametrize(
+    "record",
+    [
+        wi.paper_record(),
+        wi.paper_record().replace(tip_mass_kg=0.002, zeta=(0.04, 0.03), n_modes=2),
+        wi.load_record(FITS / "cantilever-aluminium-30cm.toml"),
+    ],
+    ids=["paper", "tip-mass-two-zetas", "cantilever"],
+)
+def test_the_calibration_reads_the_whisker_the_model_makes(record, n_modes):
+    """The calibration's host copy of the record's whisker (its set-up, report and checks)
+    holds what :meth:`WhiskerRecord.whisker` gives, to rounding."""
+    from whiskerid.fit._host_whisker import nominal_whisker
+
+    host, w = nominal_whisker(record, n_modes), record.whisker().with_modes(n_modes)
+    for name in ("length_m", "EI", "rho_a", "zeta", "tip_mass_kg", "sensor_x_m", "mu", "beta",
+                 "natural_frequencies_hz"):  # fmt: skip
+        np.testing.assert_allclose(getattr(host, name), getattr(w, name), rtol=1e-13,
+                                   err_msg=name)  # fmt: skip

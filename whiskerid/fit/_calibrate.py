@@ -48,19 +48,19 @@ import numpy as np
 from .._choices import PINS, SOLVERS
 from .._version import __version__
 from ..io import sha256_of
-from ..model import UniformBeam, WhiskerRecord, cantilever_roots
+from ..model import UniformBeam, WhiskerRecord
 from ._aot import with_compile_cache
 from ._checks import (
     LAG1_MAX,
     check_fit,
-    decay_rates,
-    peak_reference,
+    data_side,
     residual_peak,
     robust_covariance,
 )
 from ._checks import lag1 as lag1_autocorr
 from ._core import GTOL as GTOL
 from ._core import fit_problem, solve_status
+from ._host_whisker import nominal_whisker
 from ._modulus import MODULUS_TOLERANCE, check_tolerance, modulus_covariance
 from ._observation import CalibrationError, Observation, StaticTest
 from ._problem import FitProblem, reported_names
@@ -251,7 +251,7 @@ def calibrate(
             "frequency: give the frequency in Hz that the whisker rings at, or leave it out"
         )
     pin = "geometry" if pin == "auto" else pin
-    nominal = _nominal_whisker(record, n_modes)
+    nominal = nominal_whisker(record, n_modes)
     problem = FitProblem.from_observations(
         record, obs, static=static, n_modes=n_modes, zeta_per_mode=zeta_per_mode, pin=pin,
         nominal=nominal,
@@ -264,7 +264,7 @@ def calibrate(
         raise CalibrationError(f"solver must be one of {', '.join(SOLVERS)}; got {solver!r}")
     res = fit_problem(problem, obs, nominal, solver=solver, max_steps=max_steps,
                       f1_start_hz=f1_start_hz, start=start,
-                      meanwhile=lambda: _data_side(obs))  # fmt: skip
+                      meanwhile=lambda: data_side(obs))  # fmt: skip
     peak_refs, rates = res.meanwhile
     problem, resid_w, jac, bread, s2 = res.problem, res.resid, res.jac, res.bread, res.s2
     cov = s2 * bread
@@ -322,37 +322,6 @@ def calibrate(
 
     return finish(out, obs, model, nl_terms, resid=resid_w, jac=jac, core=res.amplitude,
                   free_modes=free_modes)  # fmt: skip
-
-
-def _nominal_whisker(record: WhiskerRecord, n_modes: int) -> "_HostWhisker":
-    """``record.whisker().with_modes(n_modes)`` as host numbers (see :class:`_HostWhisker`)."""
-    zeta = np.asarray(record.zeta, dtype=float)
-    if zeta.ndim == 0:  # as record.whisker(): one ζ for the record's modes
-        zeta = np.full(record.n_modes, zeta)
-    zeta = np.concatenate([zeta, np.full(max(0, n_modes - zeta.size), zeta[-1])])[:n_modes]
-    return _HostWhisker(record, zeta)
-
-
-class _HostWhisker:
-    """What a calibration reads of the record's whisker (the start grid, the problem's
-    constants, the report, the checks), as NumPy numbers computed once, with the same
-    operations as :class:`whiskerid.model.Whisker`'s (``κ = EI/ρa``, ``μ = M_t/(ρa l)``,
-    ``f_i = β_i² √κ / (2π l²)``). The record was checked when it was made; building the
-    JAX whisker and reading its properties was a chain of eager JAX operations (a device
-    transfer per field, its eigenvalues and frequencies): 2–3 ms of a 16 ms warm fit."""
-
-    def __init__(self, record: WhiskerRecord, zeta: np.ndarray):
-        s = record.structure
-        self.length_m = np.asarray(float(s.length_m))
-        self.EI = np.asarray(float(s.EI))
-        self.rho_a = np.asarray(float(s.rho_a))
-        self.zeta = zeta
-        self.tip_mass_kg = np.asarray(float(record.tip_mass_kg))
-        self.sensor_x_m = np.asarray(float(record.sensor_position_m))
-        self.mu = self.tip_mass_kg / (self.rho_a * self.length_m)
-        self.beta = np.asarray(cantilever_roots(float(self.mu), zeta.size))
-        omega = self.beta**2 * np.sqrt(self.EI / self.rho_a) / self.length_m**2
-        self.natural_frequencies_hz = omega / (2 * np.pi)
 
 
 def _check_free_modes(model: str, n_modes: int, static, obs) -> None:
@@ -501,12 +470,6 @@ def _poor_fit_warnings(per_rec: list[dict]) -> list[str]:
         for r in per_rec
         if not r["snr_db"] >= POOR_FIT_SNR_DB
     ]
-
-
-def _data_side(obs) -> tuple[list, list[float]]:
-    """What the checks read of the recordings alone (:func:`_checks.peak_reference` of each,
-    the free decays' sampling rates), computed while the compiled program runs."""
-    return [peak_reference(o.t, o.y) for o in obs], decay_rates(obs)
 
 
 def _per_recording(problem: FitProblem, optimum, obs, models, resid, peak_refs=None):

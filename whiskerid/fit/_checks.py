@@ -351,3 +351,10 @@ def decay_rates(observations) -> list[float]:
     """Sampling rates (Hz, :func:`whiskerid.io.timestamp_rate`) of the free-decay
     observations."""
     return [timestamp_rate(o.t, where=o.name) for o in observations if o.excitation == "decay"]
+
+
+def data_side(obs) -> tuple[list, list[float]]:
+    """What the checks read of the recordings alone (:func:`peak_reference` of each, the free
+    decays' sampling rates, :func:`decay_rates`): a calibration computes it while its compiled
+    program runs."""
+    return [peak_reference(o.t, o.y) for o in obs], decay_rates(obs)
