@@ -22,12 +22,9 @@ default run compiled).
 
 import ctypes
 import gc
-import json
 import os
 import shutil
-import statistics
 import tempfile
-from pathlib import Path
 
 import jax
 import pytest
@@ -54,7 +51,6 @@ _QUICK = "--xla_backend_optimization_level=0"
 def pytest_configure(config):
     """Quick compilation (JAX reads ``XLA_FLAGS`` when it first compiles, after this hook;
     the workers and commands inherit it)."""
-    _CONFIG["config"] = config
     flags = os.environ.get("XLA_FLAGS", "")
     if "xla_backend_optimization_level" in flags:
         return
@@ -63,71 +59,10 @@ def pytest_configure(config):
 
 def pytest_sessionfinish(session, exitstatus):
     """Remove the compilation cache this run made (the main process, after its workers); a
-    folder given in ``WHISKERID_TEST_JAX_CACHE`` is left to whoever gave it. With
-    ``--store-durations``, write the tests' times (see :data:`DURATIONS`)."""
-    if os.environ.get("PYTEST_XDIST_WORKER") is not None:
-        return
-    if session.config.getoption("store_durations"):
-        _store_durations(session.config.stash.get(_MEASURED, {}))
-    if os.environ.get("WHISKERID_TEST_JAX_CACHE_MADE") == _CACHE:
+    folder given in ``WHISKERID_TEST_JAX_CACHE`` is left to whoever gave it."""
+    made = os.environ.get("WHISKERID_TEST_JAX_CACHE_MADE") == _CACHE
+    if os.environ.get("PYTEST_XDIST_WORKER") is None and made:
         shutil.rmtree(_CACHE, ignore_errors=True)
-
-
-#: Each test's measured time in seconds (setup, call and teardown; a module fixture counts
-#: in its first test), by node id, as ``pytest --store-durations`` last wrote it. The test
-#: files go to the workers longest first: a file stays in one worker (``--dist loadfile``),
-#: and the longest ones, one slow check each, came last in xdist's own order (files with the
-#: most tests first), so one worker ran alone at the end. New tests count as the median.
-DURATIONS = Path(__file__).with_name("durations.json")
-_MEASURED = pytest.StashKey[dict]()
-
-
-def pytest_addoption(parser):
-    parser.addoption(
-        "--store-durations",
-        action="store_true",
-        help="write each test's time to tests/durations.json (merged with the times there), "
-        "which orders the test files for the workers, longest first",
-    )
-
-
-@pytest.hookimpl(trylast=True)  # after -m has deselected: order what runs
-def pytest_collection_modifyitems(config, items):
-    """Test files in order of their total measured time, longest first; a file's tests keep
-    their order (xdist's reordering is off in ``addopts``, so the workers get this one)."""
-    known = _read_durations()
-    guess = statistics.median(known.values()) if known else 1.0
-    total: dict[Path, float] = {}
-    first: dict[Path, int] = {}
-    for k, item in enumerate(items):
-        total[item.path] = total.get(item.path, 0.0) + known.get(item.nodeid, guess)
-        first.setdefault(item.path, k)
-    items.sort(key=lambda item: (-total[item.path], first[item.path]))
-
-
-def pytest_runtest_logreport(report):
-    """Add up each test's setup, call and teardown times (in the main process, which gets
-    every worker's reports)."""
-    config = _CONFIG.get("config")
-    if config is None or not config.getoption("store_durations"):
-        return
-    measured = config.stash.setdefault(_MEASURED, {})
-    measured[report.nodeid] = measured.get(report.nodeid, 0.0) + report.duration
-
-
-_CONFIG: dict = {}  # the run's pytest config (report hooks are not given it)
-
-
-def _read_durations() -> dict[str, float]:
-    try:
-        return {str(k): float(v) for k, v in json.loads(DURATIONS.read_text()).items()}
-    except (OSError, ValueError, AttributeError):
-        return {}
-
-
-def _store_durations(measured: dict[str, float]) -> None:
-    merged = _read_durations() | {k: round(v, 2) for k, v in measured.items()}
-    DURATIONS.write_text(json.dumps(dict(sorted(merged.items())), indent=0) + "\n")
 
 
 #: A test process holding more than this after a test frees JAX's compiled code (bytes).
