@@ -32,7 +32,7 @@ still prefer the nonlinear terms by BIC, keeps ``ok`` with a model-error term in
 
 import numpy as np
 
-from ._checks import bartlett_meat
+from ._checks import bartlett_meat, lag_below
 from ._chi2 import chi2_sf
 from ._core import _padded as padded_problem
 from ._core import unflatten_numpy
@@ -219,17 +219,10 @@ def test_lag(r: np.ndarray) -> int:
 
 def test_lags(rs: np.ndarray) -> list[int]:
     """:func:`test_lag` of each row of ``rs`` (``m × n``), their autocorrelations by one FFT
-    call (the model-error term asks it of six residual vectors of each recording); the
-    same steps as :func:`._checks.lag_below`, row by row."""
+    call (:func:`._checks.lag_below` of the rows; the model-error term asks it of six
+    residual vectors of each recording)."""
     n = rs.shape[1]
-    limit = max(0.1, float(np.sqrt(2.0 * np.log(max(n, 2)) / n)))
-    rc = rs - rs.mean(axis=1, keepdims=True)
-    f = np.fft.rfft(rc, 2 * n, axis=1)
-    acf = np.fft.irfft(f * np.conj(f), axis=1)[:, :n]
-    acf = acf / np.maximum(acf[:, :1], 1e-300)
-    tail_max = np.maximum.accumulate(np.abs(acf[:, ::-1]), axis=1)[:, ::-1]
-    below = tail_max < limit
-    lags = np.where(below.any(axis=1), below.argmax(axis=1), n)
+    lags = lag_below(rs, max(0.1, float(np.sqrt(2.0 * np.log(max(n, 2)) / n))))
     # no lag at all where even lag 1 looks white (the fit's rule keeps one)
     return [0 if lag <= 1 else int(min(lag, n // 4)) for lag in lags]
 

@@ -126,17 +126,20 @@ def _periodogram(x: np.ndarray, window: np.ndarray) -> np.ndarray:
     return np.abs(np.fft.rfft(x * window))[1:] ** 2
 
 
-def lag_below(r: np.ndarray, limit: float) -> int:
+def lag_below(r: np.ndarray, limit: float):
     """First lag from which the residuals' autocorrelation (by FFT) stays below ``limit`` in
-    magnitude at every later lag; ``r.size`` when it never does."""
-    n = r.size
-    rc = r - r.mean()
-    f = np.fft.rfft(rc, 2 * n)
-    acf = np.fft.irfft(f * np.conj(f))[:n]
-    acf = acf / max(acf[0], 1e-300)
-    tail_max = np.maximum.accumulate(np.abs(acf[::-1]))[::-1]
-    below = np.flatnonzero(tail_max < limit)
-    return int(below[0]) if below.size else n
+    magnitude at every later lag; ``n`` when it never does. ``r`` is one residual vector
+    (an int is returned) or rows of them (``m × n``: an array of ``m`` lags, by one FFT call)."""
+    rows = np.atleast_2d(r)
+    n = rows.shape[1]
+    rc = rows - rows.mean(axis=1, keepdims=True)
+    f = np.fft.rfft(rc, 2 * n, axis=1)
+    acf = np.fft.irfft(f * np.conj(f), axis=1)[:, :n]
+    acf = acf / np.maximum(acf[:, :1], 1e-300)
+    tail_max = np.maximum.accumulate(np.abs(acf[:, ::-1]), axis=1)[:, ::-1]
+    below = tail_max < limit
+    lags = np.where(below.any(axis=1), below.argmax(axis=1), n)
+    return int(lags[0]) if np.ndim(r) == 1 else lags
 
 
 def hac_lag(r: np.ndarray) -> int:
