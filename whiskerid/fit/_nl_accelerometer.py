@@ -17,6 +17,7 @@ Dry friction is not in ``r``: an accelerometer reads its quadrature through the 
 :func:`whiskerid.fit._nl_friction._friction_offset`.
 """
 
+import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array
 
@@ -26,10 +27,10 @@ from ..model import NonlinearMode
 def _k(mode, a) -> tuple[Array, Array]:
     """Real and imaginary parts of ``K(a)`` (rad²/s²; module docstring)."""
     w = mode.omega(a)
-    if isinstance(mode, NonlinearMode):
-        r = mode.zeta0 * mode.omega0 + 4 * mode.quadratic_per_m * a * w / (3 * jnp.pi)
-    else:  # a log-polynomial backbone: ζ(a) is smooth and holds all the damping
-        r = mode.zeta(a) * mode.omega0
+    if isinstance(mode, NonlinearMode):  # the mode's own ζ(a), its smooth part (no friction)
+        mode = eqx.tree_at(lambda m: m.coulomb_m_s2, mode, jnp.zeros_like(mode.coulomb_m_s2))
+    # (a log-polynomial backbone's ζ(a) is smooth and holds all the damping)
+    r = mode.zeta(a) * mode.omega0
     p = w * jnp.sqrt(1.0 - mode.zeta0**2)
     return w**2 - 2 * r**2, 2 * r * p
 
