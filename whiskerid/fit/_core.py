@@ -194,8 +194,20 @@ def _layout(problem: FitProblem):
     layout = ([np.shape(leaf) for leaf in leaves], treedef)
     if len(_LAYOUTS) >= 8:
         _LAYOUTS.pop(next(iter(_LAYOUTS)))
-    _LAYOUTS[id(problem)] = (problem, layout)
+    _LAYOUTS[id(problem)] = (problem, layout, {})
     return layout
+
+
+def positions(problem: FitProblem, name: str) -> np.ndarray:
+    """Where parameter ``name`` (a top-level entry, e.g. ``log_kappa``) sits in the flat
+    vector: an int array of its shape (kept per problem, as its layout; the score tests ask
+    it of every fit, where unflattening a whole step took a tenth of a millisecond)."""
+    _layout(problem)
+    found = _LAYOUTS[id(problem)][2]
+    if name not in found:
+        size = sum(int(np.prod(shape, dtype=int)) for shape in _layout(problem)[0])
+        found[name] = np.asarray(unflatten_numpy(problem, np.arange(size))[name])
+    return found[name]
 
 
 def _padded(problem: FitProblem):

@@ -86,6 +86,28 @@ class ColumnSubsets:
         scale, u, s, vt = _scaled_svd(self.r[:, list(idx)], rows=self.zp.shape[0])
         return (vt.T / s @ (u.T @ (self.q.T @ r))) / scale
 
+    def steps(self, subsets, r: np.ndarray) -> np.ndarray:
+        """:meth:`step` of every subset at once (``m × k``, zero outside each subset).
+
+        Each ``R_S`` is ``R`` with the columns outside ``S`` set to zero: its SVD has
+        ``R_S``'s singular values and zeros, which the cut leaves out (the cut is relative
+        to the largest and to the ``n`` rows, as :meth:`step` takes it), so one batched SVD
+        of ``k × k`` matrices serves every subset instead of an SVD call each.
+        """
+        k = self.r.shape[1]
+        member = np.zeros((len(subsets), k), dtype=bool)
+        for j, idx in enumerate(subsets):
+            member[j, list(idx)] = True
+        a = np.where(member[:, None, :], self.r[None, :, :], 0.0)
+        scale = np.sqrt(np.einsum("mij,mij->mj", a, a))
+        scale = np.where(scale > 0, scale, 1.0)
+        u, s, vt = np.linalg.svd(a / scale[:, None, :])
+        keep = s > s[:, :1] * max(k, self.zp.shape[0]) * np.finfo(float).eps
+        inv = np.where(keep, 1.0 / np.where(keep, s, 1.0), 0.0)
+        coef = np.einsum("mji,j->mi", u, self.q.T @ r) * inv
+        out = np.einsum("mij,mi->mj", vt, coef) / scale
+        return np.where(member, out, 0.0)
+
 
 def pinv_columns(a: np.ndarray) -> np.ndarray:
     """``A⁺`` of a tall ``A`` (``k × n``) through its column-scaled SVD, with

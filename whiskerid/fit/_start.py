@@ -17,7 +17,7 @@ from ..model import Whisker
 from . import _lsq as _lsq
 from ._observation import Observation
 from ._problem import ZETA_MAX, FitProblem, recording_design
-from ._signal import amplitude_spectrum, find_peaks, resample_uniform
+from ._signal import amplitude_spectrum, find_peaks, line_fit, resample_uniform
 
 
 def unalias(f_obs_hz: float, rate_hz: float, f_nominal_hz: float, *, folds: int = 6) -> float:
@@ -90,7 +90,7 @@ class _Envelope:
         run = first[: np.argmax(np.diff(np.concatenate([first, [first[-1] + 2]])) > 1) + 1]
         if run.size < 2:
             return None
-        slope = np.polyfit(mid[run], np.log(rms[run]), 1)[0]
+        slope = line_fit(mid[run], np.log(rms[run]))[0]
         zeta = -slope / (2 * np.pi * f_true_hz)
         return float(np.clip(zeta, 1e-4, 0.5)) if np.isfinite(zeta) else None
 
