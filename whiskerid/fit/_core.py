@@ -323,7 +323,10 @@ def fit_core(problem: FitProblem, masks, first: dict, *, solver: str, max_steps:
     if "flat0" in first:
         flat0 = first["flat0"]
     else:
-        flat0 = problem.flatten(start_from_grid(problem, first, masks))
+        # variable projection (the default solver) solves the linear coefficients itself
+        theta = start_from_grid(problem, first, masks,
+                                coefficients=solver != "levenberg-marquardt")  # fmt: skip
+        flat0 = problem.flatten(theta)
     mask = _mask_vector(problem, masks)
     # One block (a recording, no static test): its weight is one factor on every residual,
     # which moves neither the optimum nor s²(JᵀJ)⁻¹, so one solve; more blocks are solved
