@@ -89,7 +89,8 @@ def amplitude_test(cal, *, resid=None, jac=None, core=None) -> dict:
     r, jac = np.asarray(resid), np.asarray(jac)
     cols, info = _columns(problem, opt, core if core is not None else _whisker_terms(problem, opt))
     out = {}
-    lin = LinearPart(jac)  # factored once for the two tests and the model-error subsets
+    # factored once for the two tests and the model-error subsets (by the program, if given)
+    lin = LinearPart(jac, None if core is None else core.get("svd"))
     sizes = [c["n"] for c in cols]
     steps = {}
     for name in ("nonlinear", "split"):

@@ -24,8 +24,15 @@ class LinearPart:
         u: Left singular vectors of the column-scaled ``J`` that are kept (``n × rank``).
     """
 
-    def __init__(self, jac: np.ndarray):
-        self._scale, self.u, s, vt = _scaled_svd(np.asarray(jac))
+    def __init__(self, jac: np.ndarray, svd=None):
+        """``svd``: ``(scale, U, S, Vᵀ)`` of ``J`` with unit-norm columns when already taken
+        (the calibration's program takes it for the covariance); the cut is applied here."""
+        if svd is None:
+            self._scale, self.u, s, vt = _scaled_svd(np.asarray(jac))
+        else:
+            self._scale, u, s, vt = (np.asarray(x) for x in svd)
+            keep = s > (s[0] if s.size else 0.0) * max(*np.shape(jac)) * np.finfo(float).eps
+            self.u, s, vt = u[:, keep], s[keep], vt[keep]
         self._vs = vt.T / s  # J⁺ = diag(1/scale) V S⁻¹ Uᵀ
         self._last = None
 
