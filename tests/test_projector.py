@@ -70,3 +70,48 @@ def test_the_lags_of_many_residual_vectors_are_each_ones_own():
         want = [0 if lag <= 1 else min(lag, n // 4) for lag in own]
         assert lags_of(rs) == want
         assert want[0] == 0 and max(want[1:]) > 1  # both kinds are in the test
+
+
+def test_every_subsets_step_at_once_is_each_subsets_own_step():
+    jac, z, r = _problem(5)
+    z = np.concatenate([z, (z[:, :1] + z[:, 1:2]) * (1 + 1e-7)], axis=1)
+    subsets = ColumnSubsets(LinearPart(jac).project(z))
+    todo = [(0,), (2,), (0, 1), (1, 2), (0, 1, 2), (0, 1, 3), (0, 1, 2, 3)]
+    batch = subsets.steps(todo, r)
+    for row, idx in zip(batch, todo, strict=True):
+        np.testing.assert_allclose(row[list(idx)], subsets.step(idx, r), rtol=1e-7, atol=0)
+        assert np.all(np.delete(row, list(idx)) == 0)
+
+
+def test_white_statistics_are_the_score_tests_statistics_without_lags():
+    from whiskerid.fit._amplitude import _score
+    from whiskerid.fit._model_error import white_statistics
+
+    jac, z, r = _problem(6)
+    zp = LinearPart(jac).project(z)
+    zp[:, 1] *= 1e3  # a subset's columns keep their own scales
+    rng = np.random.default_rng(6)
+    todo = [(0,), (1,), (2,), (0, 1), (0, 2), (1, 2), (0, 1, 2)]
+    r_alts = r + 0.3 * rng.standard_normal((len(todo), r.size))
+    r_alts[1, :] = 0.0  # a variance of zero: its column is left out, T = 0
+    stats, dof = white_statistics(zp, r, r_alts, todo, dof=True)
+    for k, idx in enumerate(todo):
+        own = _score(zp[:, list(idx)], r, r_alts[k], [r.size], [0])
+        assert dof[k] == own["dof"]
+        np.testing.assert_allclose(stats[k], own["statistic"], rtol=1e-10, atol=1e-300)
+    assert stats[1] == 0.0 and dof[1] == 0
+    assert min(stats[k] for k in (0, 2, 3)) > 0
+
+
+def test_lag_below_is_where_the_tail_of_the_autocorrelation_stays_below_the_limit():
+    rng = np.random.default_rng(7)
+    rows = [rng.standard_normal(300), np.cumsum(rng.standard_normal(300)),
+            np.sin(0.3 * np.arange(300)) + 0.05 * rng.standard_normal(300)]  # fmt: skip
+    for row in rows:
+        rc = row - row.mean()
+        acf = np.correlate(rc, rc, "full")[row.size - 1 :] / (rc @ rc)
+        for limit in (0.1, 0.3):
+            tail = np.maximum.accumulate(np.abs(acf)[::-1])[::-1]
+            want = int(np.argmax(tail < limit)) if np.any(tail < limit) else row.size
+            assert lag_below(row, limit) == want
+    assert lag_below(rows[1], 0.1) > 10 and lag_below(rows[0], 0.3) == 1

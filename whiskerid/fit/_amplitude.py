@@ -35,8 +35,8 @@ import numpy as np
 from ._checks import bartlett_meat, lag_below
 from ._chi2 import chi2_sf
 from ._core import _padded as padded_problem
-from ._core import unflatten_numpy
-from ._model_error import apply_model_error, model_error
+from ._core import positions
+from ._model_error import apply_model_error, model_error, white_statistics
 from ._noise_floor import check_noise_floor
 from ._nonlinear import tip_per_sensor
 from ._problem import ZETA_MAX, residuals_and_jacobian
@@ -89,16 +89,22 @@ def amplitude_test(cal, *, resid=None, jac=None, core=None) -> dict:
     r, jac = np.asarray(resid), np.asarray(jac)
     cols, info = _columns(problem, opt, core if core is not None else _whisker_terms(problem, opt))
     out = {}
-    lin = LinearPart(jac)  # factored once for the two tests and the model-error subsets
+    # factored once for the two tests and the model-error subsets (by the program, if given)
+    lin = LinearPart(jac, None if core is None else core.get("svd"))
+    sizes = [c["n"] for c in cols]
+    steps = {}
     for name in ("nonlinear", "split"):
         z = np.concatenate([c[name] for c in cols], axis=0)
         zp = lin.project(z)
         # the score's variance from the residuals the alternative leaves (a Wald-type
         # estimate): a misfit the nonlinear terms explain does not widen its own yardstick
-        d_j, d_z, r_alt = lin.gauss_newton(r, z, zp)
-        out[name] = _score(zp, r, r_alt, [c["n"] for c in cols])
+        steps[name] = (zp, *lin.gauss_newton(r, z, zp))
+    lags = _lags_per_recording(np.stack([steps[k][3] for k in steps]), sizes)
+    for j, (name, (zp, d_j, d_z, r_alt)) in enumerate(steps.items()):
+        out[name] = _score(zp, r, r_alt, sizes, [lag[j] for lag in lags])
         out[name]["step"] = d_z.tolist()
-        out[name]["linear_step"] = unflatten_numpy(problem, d_j)
+        # the step of the two parameters _found reads (log κ and ζ's logit), not a pytree
+        out[name]["linear_step"] = {k: d_j[positions(problem, k)] for k in ("log_kappa", "zeta_u")}
         out[name]["r_alt"] = r_alt
     found = {k: _found(cal, opt, out, info, k) for k in ("nonlinear", "split")}
     for k, (zetas, freqs, _) in found.items():
@@ -227,6 +233,16 @@ def test_lags(rs: np.ndarray) -> list[int]:
     return [0 if lag <= 1 else int(min(lag, n // 4)) for lag in lags]
 
 
+def _lags_per_recording(rows: np.ndarray, sizes) -> list[list[int]]:
+    """:func:`test_lags` of each recording's part of each row of ``rows`` (``m × n``), per
+    recording: one FFT call a recording for every row."""
+    out, start = [], 0
+    for n in sizes:
+        out.append(test_lags(rows[:, start : start + n]))
+        start += n
+    return out
+
+
 def score_meat(blocks, lags=None) -> tuple[np.ndarray, int]:
     """``Σ`` over recordings of the Bartlett (Newey–West) sum of the per-sample scores
     ``Z_t r_t`` to :func:`test_lag` (none where the residuals look white), and the largest
@@ -243,6 +259,11 @@ def _score(zp, r, r_alt, sizes, lags=None):
     """The score statistic of the columns ``zp`` (already projected off ``J``: see
     :class:`._projector.LinearPart`) at residuals ``r``, its HAC variance from ``r_alt``
     (``lags``: :func:`test_lag` of each recording's ``r_alt``, when already known)."""
+    if lags is not None and not any(lags):  # white residuals (the usual case): no lag sum
+        stat, dof = white_statistics(zp, r, r_alt[None, :], [range(zp.shape[1])], dof=True)
+        k = int(dof[0])
+        return {"statistic": float(stat[0]), "dof": k,
+                "p_value": chi2_sf(float(stat[0]), k) if k else 1.0, "hac_lag": 0}  # fmt: skip
     scale = np.linalg.norm(zp, axis=0)
     scale = np.where(scale > 0, scale, 1.0)
     zp = zp / scale
@@ -262,7 +283,8 @@ def _score(zp, r, r_alt, sizes, lags=None):
     # zero where a fit to noise put ζ at its bound) carries no information: left out, not a
     # singular variance (it was a LinAlgError)
     keep = np.diag(v) > 0
-    v, s = v[np.ix_(keep, keep)], s[keep]
+    if not keep.all():
+        v, s = v[np.ix_(keep, keep)], s[keep]
     k = int(keep.sum())
     stat = float(s @ np.linalg.solve(v, s)) if k else 0.0
     p_value = chi2_sf(stat, k) if k else 1.0

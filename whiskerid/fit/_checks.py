@@ -36,6 +36,7 @@ import numpy as np
 from ..io import timestamp_rate
 from ._problem import ZETA_MAX
 from ._release import quantum
+from ._signal import line_fit
 
 #: Lag-1 autocorrelation of the residuals above which they are not treated as white noise.
 LAG1_MAX = 0.5
@@ -122,7 +123,8 @@ def _periodogram(x: np.ndarray, window: np.ndarray) -> np.ndarray:
     (or a constant stretch, a decay rung down onto its offset) fills the lowest bins and
     would read as a line at a cycle or two per record."""
     s = np.linspace(-1.0, 1.0, x.size)
-    x = x - np.polyval(np.polyfit(s, x, 1), s)
+    slope, intercept = line_fit(s, x)
+    x = x - (slope * s + intercept)
     return np.abs(np.fft.rfft(x * window))[1:] ** 2
 
 
@@ -136,9 +138,11 @@ def lag_below(r: np.ndarray, limit: float):
     f = np.fft.rfft(rc, 2 * n, axis=1)
     acf = np.fft.irfft(f * np.conj(f), axis=1)[:, :n]
     acf = acf / np.maximum(acf[:, :1], 1e-300)
-    tail_max = np.maximum.accumulate(np.abs(acf[:, ::-1]), axis=1)[:, ::-1]
-    below = tail_max < limit
-    lags = np.where(below.any(axis=1), below.argmax(axis=1), n)
+    # the lag after the last one at or above the limit (NaN counts as above), 0 if none:
+    # where the running maximum of the tail drops below it
+    above = ~(np.abs(acf) < limit)
+    last = n - 1 - np.argmax(above[:, ::-1], axis=1)
+    lags = np.where(above.any(axis=1), last + 1, 0)
     return int(lags[0]) if np.ndim(r) == 1 else lags
 
 

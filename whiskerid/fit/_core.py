@@ -82,7 +82,9 @@ class CoreResult:
             the optimum: mode 1's ``w0`` (rad/s) and ``zeta0``, and per recording ``tip``
             (mode 1's tip deflection per unit at the sensor), ``mode1`` (the design's two
             mode-1 columns, ``(n, 2)``) and ``dc`` (the design times the linear
-            coefficients), so that the test runs in NumPy.
+            coefficients), so that the test runs in NumPy; and ``svd``, the SVD of the
+            column-scaled Jacobian behind ``bread`` (``(scale, U, S, Vᵀ)``, real rows of
+            ``U``), which the test projects on instead of taking it again.
         meanwhile: What ``fit_problem``'s ``meanwhile`` returned.
     """
 
@@ -162,6 +164,7 @@ def fit_problem(
             "tip": [float(out[f"tip_{i}"]) for i in range(len(sizes))],
             "mode1": [out[f"mode1_{i}"][:n] for i, n in enumerate(sizes)],
             "dc": [out[f"dc_{i}"][:n] for i, n in enumerate(sizes)],
+            "svd": (out["svd_d"], out["svd_u"][rows], out["svd_s"], out["svd_vt"]),
         },
         meanwhile=extra,
     )
@@ -194,8 +197,20 @@ def _layout(problem: FitProblem):
     layout = ([np.shape(leaf) for leaf in leaves], treedef)
     if len(_LAYOUTS) >= 8:
         _LAYOUTS.pop(next(iter(_LAYOUTS)))
-    _LAYOUTS[id(problem)] = (problem, layout)
+    _LAYOUTS[id(problem)] = (problem, layout, {})
     return layout
+
+
+def positions(problem: FitProblem, name: str) -> np.ndarray:
+    """Where parameter ``name`` (a top-level entry, e.g. ``log_kappa``) sits in the flat
+    vector: an int array of its shape (kept per problem, as its layout; the score tests ask
+    it of every fit, where unflattening a whole step took a tenth of a millisecond)."""
+    _layout(problem)
+    found = _LAYOUTS[id(problem)][2]
+    if name not in found:
+        size = sum(int(np.prod(shape, dtype=int)) for shape in _layout(problem)[0])
+        found[name] = np.asarray(unflatten_numpy(problem, np.arange(size))[name])
+    return found[name]
 
 
 def _padded(problem: FitProblem):
@@ -311,7 +326,10 @@ def fit_core(problem: FitProblem, masks, first: dict, *, solver: str, max_steps:
     if "flat0" in first:
         flat0 = first["flat0"]
     else:
-        flat0 = problem.flatten(start_from_grid(problem, first, masks))
+        # variable projection (the default solver) solves the linear coefficients itself
+        theta = start_from_grid(problem, first, masks,
+                                coefficients=solver != "levenberg-marquardt")  # fmt: skip
+        flat0 = problem.flatten(theta)
     mask = _mask_vector(problem, masks)
     # One block (a recording, no static test): its weight is one factor on every residual,
     # which moves neither the optimum nor s²(JᵀJ)⁻¹, so one solve; more blocks are solved
@@ -333,6 +351,7 @@ def fit_core(problem: FitProblem, masks, first: dict, *, solver: str, max_steps:
     resid = _masked_residuals(flat, (weighted, mask))
     jac = jax.jacfwd(_masked_residuals)(flat, (weighted, mask))
     n_real = jnp.sum(mask)
+    bread, svd = _lsq.scaled_inverse_gram_svd(jac)
     out = {
         "value": flat,
         "ok": ok[-1],
@@ -341,7 +360,12 @@ def fit_core(problem: FitProblem, masks, first: dict, *, solver: str, max_steps:
         "weights": weights,
         "resid": resid,
         "jac": jac,
-        "bread": _lsq.scaled_inverse_gram(jac),
+        "bread": bread,
+        # the SVD behind it, for the score tests (the host took it again: module _projector)
+        "svd_d": svd[0],
+        "svd_u": svd[1],
+        "svd_s": svd[2],
+        "svd_vt": svd[3],
         "s2": jnp.sum(resid**2) / jnp.maximum(n_real - flat.size, 1.0),
         "gcos": _lsq.gradient_cosine_from(jac, resid),
     }

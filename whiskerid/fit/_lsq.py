@@ -115,13 +115,19 @@ def residual_variance(r, n_params: int):
 @jax.jit
 def scaled_inverse_gram(jac: jax.Array) -> jax.Array:
     """``(JᵀJ)⁺`` through the SVD of ``J`` with unit-norm columns (see :func:`covariance`)."""
+    return scaled_inverse_gram_svd(jac)[0]
+
+
+def scaled_inverse_gram_svd(jac: jax.Array):
+    """:func:`scaled_inverse_gram` and the SVD it took: ``(bread, (d, U, S, Vᵀ))`` with
+    ``J = U S Vᵀ diag(d)`` (the score tests project on ``U``: module ``_projector``)."""
     norms = jnp.linalg.norm(jac, axis=0)
     d = jnp.where(norms > 0, norms, 1.0)
-    _, s, vt = jnp.linalg.svd(jac / d, full_matrices=False)
+    u, s, vt = jnp.linalg.svd(jac / d, full_matrices=False)
     cut = s[0] * max(jac.shape) * jnp.finfo(jac.dtype).eps
     inv_s2 = jnp.where(s > cut, 1.0 / jnp.where(s > cut, s, 1.0) ** 2, 0.0)
     w = vt.T / d[:, None]
-    return (w * inv_s2) @ w.T
+    return (w * inv_s2) @ w.T, (d, u, s, vt)
 
 
 def gradient_cosine(fn, y, args=None) -> jax.Array:

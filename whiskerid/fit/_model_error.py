@@ -34,7 +34,7 @@ release or the modes left out leave a misfit): their 1σ then grows, their value
 
 import numpy as np
 
-from ._core import unflatten_numpy
+from ._core import positions
 from ._problem import ZETA_MAX
 from ._projector import ColumnSubsets, LinearPart, pinv_columns
 
@@ -53,19 +53,56 @@ def _subset_statistics(lin, r, zs, sizes, known=None):
     if not todo:
         return out
     # as LinearPart.alternative: the residuals each subset's step leaves
-    r_alts = np.stack([lin.off(r) - subsets.zp[:, idx] @ subsets.step(idx, r) for idx in todo])
+    r_alts = lin.off(r)[None, :] - subsets.steps(todo, r) @ subsets.zp.T
     lags, start = [], 0  # each recording's lags, all subsets at once
     for n in sizes:
         lags.append(test_lags(r_alts[:, start : start + n]))
         start += n
+    white = white_statistics(subsets.zp, r, r_alts, todo)
     for k, idx in enumerate(todo):
         own = [lag[k] for lag in lags]
-        out[idx] = (
-            _score(subsets.zp[:, idx], r, r_alts[k], sizes, own)["statistic"],
-            r_alts[k],
-            own,
-        )
+        if any(own):
+            stat = _score(subsets.zp[:, idx], r, r_alts[k], sizes, own)["statistic"]
+        else:  # no lag in any recording (white residuals, the usual case): the batch's
+            stat = float(white[k])
+        out[idx] = (stat, r_alts[k], own)
     return out
+
+
+def white_statistics(zp, r, r_alts, subsets, *, dof: bool = False):
+    """:func:`._amplitude._score`'s statistic of each subset ``subsets[k]`` of the columns
+    of ``zp`` at ``r``, its variance from ``r_alts[k]``, for residuals that need no lag: all
+    at once, as batched ``k × k`` products and solves (one ``_score`` a subset was most of
+    the model-error term's time).
+
+    The same statistic: each column scaled to unit norm (a subset's columns keep their own
+    norms), ``meat = Σ_t r_t² z_t z_tᵀ`` (Bartlett's sum with no lag; over all the
+    recordings' rows at once, which is the sum of their blocks; one product of the squared
+    residuals with the columns' pairwise products for every subset), the variance never
+    below white noise's ``mean(r²) ZᵀZ`` on its diagonal, and ``T = sᵀV⁻¹s`` with
+    ``s = Zᵀr`` over the subset's columns whose variance is positive. The columns outside a
+    subset, or left out, are an identity block of ``V`` with a zero score, which adds nothing
+    to ``T``. With ``dof``, also the number of columns each statistic kept.
+    """
+    zt = np.ascontiguousarray(zp.T)  # columns as rows: the products below run along them
+    k, n = zt.shape
+    scale = np.sqrt(np.einsum("ij,ij->i", zt, zt))
+    zt /= np.where(scale > 0, scale, 1.0)[:, None]
+    r2 = r_alts**2
+    meat = (r2 @ (zt[:, None, :] * zt[None, :, :]).reshape(k * k, n).T).reshape(-1, k, k)
+    white = np.mean(r2, axis=1)[:, None, None] * (zt @ zt.T)
+    dm = np.diagonal(meat, axis1=1, axis2=2)
+    v = np.maximum(dm, np.diagonal(white, axis1=1, axis2=2))
+    sd = np.sqrt(np.maximum(dm, 1e-300))
+    v = meat / (sd[:, :, None] * sd[:, None, :]) * np.sqrt(v[:, :, None] * v[:, None, :])
+    member = np.zeros((len(subsets), k), dtype=bool)
+    for j, idx in enumerate(subsets):
+        member[j, list(idx)] = True
+    keep = member & (np.diagonal(v, axis1=1, axis2=2) > 0)
+    v = np.where(keep[:, :, None] & keep[:, None, :], v, np.eye(k))
+    s = np.where(keep, zt @ r, 0.0)
+    stat = np.einsum("mi,mi->m", s, np.linalg.solve(v, s[:, :, None])[:, :, 0])
+    return (stat, keep.sum(axis=1)) if dof else stat
 
 
 def step_map(jac, z, idx, lin=None) -> np.ndarray:
@@ -117,8 +154,7 @@ def model_error(cal, jac, r, cols, *, lin=None, known=None) -> dict:
     out = {"preferred": bool(gain > 0), "terms": [NONLINEAR[j] for j in best],
            "ln_n": ln_n, "bic_gain": gain}  # fmt: skip
     z = zs[:, list(best)]
-    where = unflatten_numpy(cal.problem, np.arange(jac.shape[1], dtype=float))
-    idx = [int(np.ravel(where["log_kappa"])[0]), int(np.ravel(where["zeta_u"])[0])]
+    idx = [int(np.ravel(positions(cal.problem, k))[0]) for k in ("log_kappa", "zeta_u")]
     x = step_map(jac, z, idx, lin)
     delta = x.T @ r
     r_alt = stats[best][1]

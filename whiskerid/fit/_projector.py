@@ -24,8 +24,15 @@ class LinearPart:
         u: Left singular vectors of the column-scaled ``J`` that are kept (``n × rank``).
     """
 
-    def __init__(self, jac: np.ndarray):
-        self._scale, self.u, s, vt = _scaled_svd(np.asarray(jac))
+    def __init__(self, jac: np.ndarray, svd=None):
+        """``svd``: ``(scale, U, S, Vᵀ)`` of ``J`` with unit-norm columns when already taken
+        (the calibration's program takes it for the covariance); the cut is applied here."""
+        if svd is None:
+            self._scale, self.u, s, vt = _scaled_svd(np.asarray(jac))
+        else:
+            self._scale, u, s, vt = (np.asarray(x) for x in svd)
+            keep = s > (s[0] if s.size else 0.0) * max(*np.shape(jac)) * np.finfo(float).eps
+            self.u, s, vt = u[:, keep], s[keep], vt[keep]
         self._vs = vt.T / s  # J⁺ = diag(1/scale) V S⁻¹ Uᵀ
         self._last = None
 
@@ -85,6 +92,28 @@ class ColumnSubsets:
         """``Z⊥_S⁺ r`` for the columns ``idx``."""
         scale, u, s, vt = _scaled_svd(self.r[:, list(idx)], rows=self.zp.shape[0])
         return (vt.T / s @ (u.T @ (self.q.T @ r))) / scale
+
+    def steps(self, subsets, r: np.ndarray) -> np.ndarray:
+        """:meth:`step` of every subset at once (``m × k``, zero outside each subset).
+
+        Each ``R_S`` is ``R`` with the columns outside ``S`` set to zero: its SVD has
+        ``R_S``'s singular values and zeros, which the cut leaves out (the cut is relative
+        to the largest and to the ``n`` rows, as :meth:`step` takes it), so one batched SVD
+        of ``k × k`` matrices serves every subset instead of an SVD call each.
+        """
+        k = self.r.shape[1]
+        member = np.zeros((len(subsets), k), dtype=bool)
+        for j, idx in enumerate(subsets):
+            member[j, list(idx)] = True
+        a = np.where(member[:, None, :], self.r[None, :, :], 0.0)
+        scale = np.sqrt(np.einsum("mij,mij->mj", a, a))
+        scale = np.where(scale > 0, scale, 1.0)
+        u, s, vt = np.linalg.svd(a / scale[:, None, :])
+        keep = s > s[:, :1] * max(k, self.zp.shape[0]) * np.finfo(float).eps
+        inv = np.where(keep, 1.0 / np.where(keep, s, 1.0), 0.0)
+        coef = np.einsum("mji,j->mi", u, self.q.T @ r) * inv
+        out = np.einsum("mij,mi->mj", vt, coef) / scale
+        return np.where(member, out, 0.0)
 
 
 def pinv_columns(a: np.ndarray) -> np.ndarray:

@@ -9,6 +9,17 @@ from dataclasses import dataclass
 import numpy as np
 
 
+def line_fit(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """``(slope, intercept)`` of the least-squares line through ``(x, y)``, in closed form:
+    ``slope = Σ(x − x̄)(y − ȳ) / Σ(x − x̄)²`` (what ``np.polyfit(x, y, 1)`` returns, to
+    rounding, without its Vandermonde matrix and SVD: a start search fits several lines per
+    recording)."""
+    xc = x - x.mean()
+    y_mean = y.mean()
+    slope = float(xc @ (y - y_mean)) / float(xc @ xc)
+    return slope, float(y_mean) - slope * float(x.mean())
+
+
 def resample_uniform(
     t: np.ndarray, x: np.ndarray, rate_hz: float | None = None
 ) -> tuple[np.ndarray, np.ndarray, float]:

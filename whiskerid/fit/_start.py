@@ -17,7 +17,7 @@ from ..model import Whisker
 from . import _lsq as _lsq
 from ._observation import Observation
 from ._problem import ZETA_MAX, FitProblem, recording_design
-from ._signal import amplitude_spectrum, find_peaks, resample_uniform
+from ._signal import amplitude_spectrum, find_peaks, line_fit, resample_uniform
 
 
 def unalias(f_obs_hz: float, rate_hz: float, f_nominal_hz: float, *, folds: int = 6) -> float:
@@ -90,7 +90,7 @@ class _Envelope:
         run = first[: np.argmax(np.diff(np.concatenate([first, [first[-1] + 2]])) > 1) + 1]
         if run.size < 2:
             return None
-        slope = np.polyfit(mid[run], np.log(rms[run]), 1)[0]
+        slope = line_fit(mid[run], np.log(rms[run]))[0]
         zeta = -slope / (2 * np.pi * f_true_hz)
         return float(np.clip(zeta, 1e-4, 0.5)) if np.isfinite(zeta) else None
 
@@ -277,7 +277,9 @@ def _unique(freqs, rel: float = 1e-3) -> list[float]:
     return out
 
 
-def start_from_grid(problem: FitProblem, grid: dict, masks=None) -> dict:
+def start_from_grid(
+    problem: FitProblem, grid: dict, masks=None, *, coefficients: bool = True
+) -> dict:
     """The start parameters from :func:`start_grid` (traceable): the grid point of least
     profile cost, with the linear coefficients solved exactly there.
 
@@ -297,6 +299,9 @@ def start_from_grid(problem: FitProblem, grid: dict, masks=None) -> dict:
         problem: The fit problem.
         grid: From :func:`start_grid`.
         masks: Per recording, 1 for a sample and 0 for padding (None: no padding).
+        coefficients: Solve the linear coefficients at the point chosen (else they are left
+            at zero, except where a known sine's start time τ is read from them): a solver
+            by variable projection solves them at every point and does not read them.
     """
     steps = profile_steps(problem)
     if masks is None:
@@ -345,8 +350,15 @@ def start_from_grid(problem: FitProblem, grid: dict, masks=None) -> dict:
     if problem.fit_ei:
         theta["log_EI"] = grid["log_ei"]
         theta["static_d0"] = grid["static_d0"]
+    need = [coefficients or (r.forced == "known" and r.excitation == "sine")
+            for r in problem.recordings]  # fmt: skip
+    if not any(need):
+        return theta
     designs = [D for D, _ in problem.design(theta, profile=True)]
-    for r, rp, D, m in zip(problem.recordings, theta["recs"], designs, masks, strict=True):
+    for r, rp, D, m, solve in zip(problem.recordings, theta["recs"], designs, masks, need,
+                                  strict=True):  # fmt: skip
+        if not solve:
+            continue
         coef = jnp.linalg.lstsq(D * m[:, None], r.y * m)[0]
         if r.forced == "known" and r.excitation == "sine":
             # Coefficients of the unit-RMS columns W(t), W(t − T/4): c1 W(t) + c2 W(t − T/4)
