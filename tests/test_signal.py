@@ -34,3 +34,13 @@ def test_find_peaks_interpolates_between_bins():
     freqs, amps = wi.amplitude_spectrum(x, rate)
     (p,) = wi.find_peaks(freqs, amps, n=1)
     assert abs(p.frequency_hz - f0) < 0.01
+
+
+def test_line_fit_is_polyfits_line_and_flat_through_one_distinct_x():
+    from whiskerid.fit._signal import line_fit
+
+    rng = np.random.default_rng(4)
+    x = np.sort(rng.uniform(-3, 50, 200))
+    y = 0.7 * x - 4 + rng.normal(0, 2, x.size)
+    np.testing.assert_allclose(line_fit(x, y), np.polyfit(x, y, 1), rtol=1e-12)
+    assert line_fit(np.full(4, 2.0), np.array([1.0, 2.0, 3.0, 6.0])) == (0.0, 3.0)

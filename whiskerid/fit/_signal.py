@@ -16,7 +16,8 @@ def line_fit(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     recording)."""
     xc = x - x.mean()
     y_mean = y.mean()
-    slope = float(xc @ (y - y_mean)) / float(xc @ xc)
+    sxx = float(xc @ xc)
+    slope = float(xc @ (y - y_mean)) / sxx if sxx > 0 else 0.0  # one distinct x: flat
     return slope, float(y_mean) - slope * float(x.mean())
 
 
