@@ -148,3 +148,49 @@ def test_blas_is_held_to_one_thread_while_a_release_is_searched_and_restored_aft
     assert {i["filepath"]: i["num_threads"] for i in threadpool_info()} == before
     with _threads.one_blas_thread(jax_lapack=True):
         assert all(i["num_threads"] == 1 for i in threadpool_info() if i["user_api"] == "blas")
+
+
+def test_replaced_module_is_the_pytree_tree_at_builds_and_shares_the_layout():
+    """The set-up's field replacement (no ``__init__`` again) against ``eqx.tree_at``: the
+    same tree structure (static fields included, so the same compiled program) and the same
+    leaves; an unknown field is refused; a reweighted problem finds the parameter positions
+    of the problem it was made from."""
+    import equinox as eqx
+    import jax
+
+    from whiskerid.fit import _core
+    from whiskerid.fit._problem import FitProblem
+
+    record = wi.paper_record()
+    t = np.arange(500) / 200.0
+    y = np.exp(-0.5 * t) * np.sin(2 * np.pi * 23.0 * t)
+    obs = [wi.Observation(t, y, excitation="decay", observable="deflection", gain=1.0)] * 2
+    problem = FitProblem.from_observations(record, obs, n_modes=2)
+    padded, masks = _core._padded(problem)
+    r = problem.recordings[0]
+    size = _core.bucket(r.t.shape[0])
+    t_pad = np.concatenate([np.asarray(r.t), np.full(size - r.t.shape[0], r.t[-1])])
+    y_pad = np.concatenate([np.asarray(r.y), np.zeros(size - r.t.shape[0])])
+    expected = eqx.tree_at(lambda q: (q.t, q.y), r, (t_pad, y_pad))
+    expected = eqx.tree_at(lambda q: q.recordings, problem, (expected, expected))
+    leaves, treedef = jax.tree_util.tree_flatten(padded)
+    leaves_exp, treedef_exp = jax.tree_util.tree_flatten(expected)
+    assert treedef == treedef_exp and len(leaves) == len(leaves_exp)
+    for a, b in zip(leaves, leaves_exp, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert problem.recordings[0].t.shape[0] == 500  # the original is left as it was
+    assert [float(m.sum()) for m in masks] == [500.0, 500.0] and masks[0].size == size
+    with pytest.raises(AttributeError, match="no field wieght"):
+        _core.replaced(r, wieght=2.0)
+
+    weighted = _core.replaced(problem, recordings=tuple(
+        _core.replaced(q, weight=np.asarray(3.0)) for q in problem.recordings))  # fmt: skip
+    _core.share_layout(problem, weighted)
+    for name in ("log_kappa", "zeta_u"):
+        np.testing.assert_array_equal(
+            _core.positions(weighted, name), _core.positions(problem, name)
+        )
+    flat = np.arange(problem.flatten(problem.zero_params()).size, dtype=float)
+    assert jax.tree_util.tree_all(jax.tree_util.tree_map(
+        np.array_equal, _core.unflatten_numpy(weighted, flat),
+        problem.unflatten(flat)))  # fmt: skip

@@ -98,7 +98,21 @@ def test_high_modes_stay_finite_and_precise():
 
 @pytest.mark.parametrize("mu", [0.0, 0.06, 1.0, 200.0])
 def test_concrete_mu_roots_equal_the_traced_ones(mu):
-    """A concrete μ takes the cached NumPy path; a traced μ the JAX bisection (same steps)."""
+    """A concrete μ takes the cached host path (Newton steps in the bracket); a traced μ the
+    JAX bisection: the same roots to rounding."""
     concrete = np.asarray(wi.cantilever_roots(mu, 6))
     traced = np.asarray(jax.jit(lambda m: wi.cantilever_roots(m, 6))(mu))
     np.testing.assert_allclose(concrete, traced, rtol=4e-16, atol=0)
+
+
+@pytest.mark.parametrize("n_modes", [1, 2, 5, 10])
+def test_host_newton_roots_equal_the_traced_bisection_over_tip_masses(n_modes):
+    """The host's safeguarded Newton search against the traced path's 80 halvings (another
+    algorithm on the same bracket), for tip masses from a speck to a thousand beams."""
+    from whiskerid.model._modes import host_roots
+
+    mus = np.concatenate([[0.0], np.geomspace(1e-6, 1e3, 49)])
+    traced = np.asarray(jax.jit(jax.vmap(lambda m: wi.cantilever_roots(m, n_modes)))(mus))
+    host = np.array([host_roots(m, n_modes) for m in mus])
+    np.testing.assert_allclose(host, traced, rtol=2e-15, atol=0)
+    assert np.all(np.diff(host, axis=1) > 0)  # β_1 < β_2 < …, each root found once

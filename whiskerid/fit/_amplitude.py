@@ -133,7 +133,9 @@ def amplitude_test(cal, *, resid=None, jac=None, core=None) -> dict:
     for k in ("nonlinear", "split"):
         out[k].pop("linear_step")
         out[k].pop("r_alt")
-    out["model_error"] = model_error(cal, jac, r, cols, lin=lin, known=known)
+    # the same columns, projected once for both
+    out["model_error"] = model_error(cal, jac, r, cols, lin=lin, known=known,
+                                     zp=steps["nonlinear"][0])  # fmt: skip
     return out
 
 

@@ -2,7 +2,8 @@
 
 import numpy as np
 
-from ..model import WhiskerRecord, cantilever_roots
+from ..model import WhiskerRecord
+from ..model._modes import host_roots
 
 
 def nominal_whisker(record: WhiskerRecord, n_modes: int) -> "HostWhisker":
@@ -31,6 +32,6 @@ class HostWhisker:
         self.tip_mass_kg = np.asarray(float(record.tip_mass_kg))
         self.sensor_x_m = np.asarray(float(record.sensor_position_m))
         self.mu = self.tip_mass_kg / (self.rho_a * self.length_m)
-        self.beta = np.asarray(cantilever_roots(float(self.mu), zeta.size))
+        self.beta = host_roots(float(self.mu), zeta.size)  # no device round trip
         omega = self.beta**2 * np.sqrt(self.EI / self.rho_a) / self.length_m**2
         self.natural_frequencies_hz = omega / (2 * np.pi)

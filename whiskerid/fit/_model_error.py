@@ -39,15 +39,16 @@ from ._problem import ZETA_MAX
 from ._projector import ColumnSubsets, LinearPart, pinv_columns
 
 
-def _subset_statistics(lin, r, zs, sizes, known=None):
+def _subset_statistics(lin, r, zs, sizes, known=None, zp=None):
     """``{subset: (T_S, residuals after the Gauss–Newton step with S, their test lag per
     recording or None)}`` over every non-empty subset of the columns of ``zs`` (``known``:
-    subsets already computed, ``(T_S, residuals)``)."""
+    subsets already computed, ``(T_S, residuals)``; ``zp``: ``lin.project(zs)``, when
+    already computed)."""
     from ._amplitude import _score, test_lags
 
     out = {idx: (stat, r_alt, None) for idx, (stat, r_alt) in (known or {}).items()}
     # column by column, so each subset's Z⊥ is its columns of it; factored once for all
-    subsets = ColumnSubsets(lin.project(zs))
+    subsets = ColumnSubsets(lin.project(zs) if zp is None else zp)
     todo = [idx for idx in (tuple(j for j in range(zs.shape[1]) if mask >> j & 1)
                             for mask in range(1, 2 ** zs.shape[1])) if idx not in out]  # fmt: skip
     if not todo:
@@ -128,7 +129,7 @@ def step_map(jac, z, idx, lin=None) -> np.ndarray:
     return pinv_columns(lin.project(z)).T @ b[idx].T
 
 
-def model_error(cal, jac, r, cols, *, lin=None, known=None) -> dict:
+def model_error(cal, jac, r, cols, *, lin=None, known=None, zp=None) -> dict:
     """Whether BIC prefers the nonlinear model, and the linear fit's averaging bias.
 
     Args:
@@ -138,6 +139,8 @@ def model_error(cal, jac, r, cols, *, lin=None, known=None) -> dict:
         lin: ``LinearPart(jac)``, when already factored.
         known: Subsets whose statistic and residuals are already known (the amplitude
             test's own: all three columns).
+        zp: The nonlinear columns of ``cols`` projected off ``J`` (``lin.project``), when
+            already computed (the amplitude test's own).
 
     Returns:
         ``preferred`` (bool), ``terms`` (the subset chosen), ``ln_n``, ``bic_gain``
@@ -150,7 +153,7 @@ def model_error(cal, jac, r, cols, *, lin=None, known=None) -> dict:
     sizes = [c["n"] for c in cols]
     ln_n = float(np.log(sum(sizes)))
     lin = LinearPart(jac) if lin is None else lin
-    stats = _subset_statistics(lin, r, zs, sizes, known)
+    stats = _subset_statistics(lin, r, zs, sizes, known, zp)
     best = max(stats, key=lambda s: stats[s][0] - len(s) * ln_n)
     gain = float(stats[best][0] - len(best) * ln_n)
     out = {"preferred": bool(gain > 0), "terms": [NONLINEAR[j] for j in best],

@@ -36,10 +36,10 @@ from ..model import (
     Whisker,
     WhiskerRecord,
     base_motion_response,
-    cantilever_roots,
     harmonic_steady_state,
     observe,
 )
+from ..model._modes import host_roots
 from . import _lsq as _lsq
 from ._decay import decay_rates, free_decay_columns
 from ._observation import CalibrationError, Observation, StaticTest, nominal_gain
@@ -168,7 +168,7 @@ class FitProblem(eqx.Module):
         coil = isinstance(structure, CoilSpring)
         roots = None
         if static is None:
-            roots = cantilever_roots(float(nominal.mu), int(n_modes))
+            roots = host_roots(float(nominal.mu), int(n_modes))
         # NumPy leaves: each jnp.asarray of a host number is a device transfer of its own
         # (tens of µs, a dozen per problem); a jitted program takes either alike
         f64 = lambda x: np.asarray(float(x))  # noqa: E731

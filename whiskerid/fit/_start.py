@@ -61,10 +61,10 @@ class _Envelope:
     does not depend on the frequency (the cumulative squares, the median step) computed
     once for all of its spectral peaks."""
 
-    def __init__(self, t: np.ndarray, y: np.ndarray):
+    def __init__(self, t: np.ndarray, y: np.ndarray, dt: float | None = None):
         self.t = t
         self.span = t[-1] - t[0]
-        self.dt = float(np.median(np.diff(t)))
+        self.dt = float(np.median(np.diff(t))) if dt is None else dt  # the median step
         self.sums = np.concatenate([[0.0], np.cumsum(y**2)])
 
     def zeta(self, f_obs_hz: float, f_true_hz: float) -> float | None:
@@ -246,12 +246,13 @@ def _spectral_candidates(observations, f1_nom, lo, hi):
         # below the noise in the Hann-windowed spectrum (the start then rested on the grid
         # alone and picked an aliased higher mode in 5 of 200 seeded trials).
         yc = o.y - np.median(o.y)
-        _, yu, rate = resample_uniform(o.t, yc)
+        dt = float(np.median(np.diff(o.t)))  # once for the grid and the envelope
+        _, yu, rate = resample_uniform(o.t, yc, 1.0 / dt)
         peaks = spectral_peaks_uniform(yu, rate) + spectral_peaks_uniform(yu, rate, "none")
         nyquist = rate / 2 if not np.isfinite(nyquist) else max(nyquist, rate / 2)
         first = True  # the recording's decay rate: its largest peak's (the envelope is the
         # whole signal's RMS, over windows of four periods: a weak low line's are too long)
-        envelope = _Envelope(o.t, yc)
+        envelope = _Envelope(o.t, yc, dt)
         for fp in _unique(peaks):
             # the alias nearest the nominal, and the line itself (below the Nyquist frequency)
             f_true = unalias(fp, rate, f1_nom)

@@ -11,14 +11,15 @@ The roots are found by bisection on brackets that hold for every ``μ ≥ 0`` (e
 from the ``μ = 0`` root towards the ``μ → ∞`` root of ``tan β = tanh β`` as μ grows) and are
 differentiated implicitly, so gradients with respect to ``μ`` are exact. A concrete ``μ``
 (not traced: no tip mass, or a tip-mass ratio that is a constant of the computation, as in a
-fit of κ and ζ alone) takes the same bisection and Newton step in NumPy once per value
-(cached), so a jitted model carries the roots as constants instead of an 80-step loop.
+fit of κ and ζ alone) is solved on the host once per value (cached), in the same brackets by
+Newton steps kept inside them, then the same final Newton step, so a jitted model carries
+the roots as constants instead of an 80-step loop; the two paths agree to rounding (within
+1e-15 for ``μ ≤ 1000``, tested).
 
 Why not ``optimistix.root_find`` with ``optimistix.Bisection``: it finds one root per call
 from ``options=dict(lower=..., upper=...)`` in a ``while_loop`` with a tolerance test, so all
-modes would be ``vmap``-ed (every lane then runs until the slowest stops) and the NumPy twin
-above would no longer take exactly the same steps as the traced path (the two agree to
-rounding because they do). The bracket here holds for every ``μ ≥ 0`` and every mode at
+modes would be ``vmap``-ed (every lane then runs until the slowest stops). The bracket here
+holds for every ``μ ≥ 0`` and every mode at
 once, 80 halvings take any bracket to rounding level, and the gradient is already the
 implicit-function one (the Newton step below), which is what ``optx.ImplicitAdjoint``
 would add; a library solver would change none of the numbers and add a loop per mode.
@@ -33,6 +34,7 @@ frequency equation above. They are evaluated in a cancellation-free form
 """
 
 import functools
+import math
 
 import jax
 import jax.numpy as jnp
@@ -95,18 +97,48 @@ def _frequency_function(beta, mu, xp=jnp):
     )
 
 
+def _value_and_slope(beta: float, mu: float) -> tuple[float, float]:
+    """:func:`_frequency_function` and its derivative in β at one point (Python floats)."""
+    c, s, ch, th = math.cos(beta), math.sin(beta), math.cosh(beta), math.tanh(beta)
+    value = 1.0 / ch + c + mu * beta * (c * th - s)
+    slope = -th / ch - s + mu * (c * th - s) + mu * beta * (-s * th + c / ch**2 - c)
+    return value, slope
+
+
+def _newton_in_bracket(mu: float, lo: float, hi: float) -> float:
+    """The root of the frequency equation in ``[lo, hi]`` (a sign change) by Newton steps
+    kept inside the bracket, which each evaluation narrows (a step that would leave it is a
+    bisection instead), until a step is at rounding level: 5–8 evaluations where 80
+    halvings took 80."""
+    f_lo = _value_and_slope(lo, mu)[0]
+    beta = 0.5 * (lo + hi)
+    for _ in range(200):  # each bisection halves the bracket: far more than ever needed
+        f, slope = _value_and_slope(beta, mu)
+        if f == 0.0:
+            return beta
+        if (f > 0) == (f_lo > 0):
+            lo, f_lo = beta, f
+        else:
+            hi = beta
+        step = beta - f / slope if slope != 0.0 else math.nan
+        new = step if lo <= step <= hi else 0.5 * (lo + hi)
+        if abs(new - beta) <= 4 * np.finfo(float).eps * abs(beta):
+            return new
+        beta = new
+    return beta
+
+
 @functools.lru_cache(maxsize=256)
 def _roots_np(mu: float, n_modes: int) -> np.ndarray:
-    """:func:`cantilever_roots` at a concrete ``μ``: the same steps in NumPy (read-only)."""
+    """:func:`cantilever_roots` at a concrete ``μ``, on the host (read-only, cached).
+
+    The same bracket as the traced path's bisection, searched by safeguarded Newton steps
+    (:func:`_newton_in_bracket`) instead of 80 halvings in NumPy (0.67 ms for each whisker
+    not seen before in a process, a twentieth of a warm calibration), then the traced
+    path's final Newton step. Both land on the root to rounding (within 1e-13, relative;
+    tested against the traced bisection)."""
     lo, hi = _brackets(n_modes)
-    lo, hi = lo + 1e-12, hi.copy()
-    f_lo = _frequency_function(lo, mu, np)
-    for _ in range(_BISECTION_STEPS):
-        mid = 0.5 * (lo + hi)
-        f_mid = _frequency_function(mid, mu, np)
-        same = np.sign(f_mid) == np.sign(f_lo)
-        lo, hi, f_lo = np.where(same, mid, lo), np.where(same, hi, mid), np.where(same, f_mid, f_lo)
-    beta = 0.5 * (lo + hi)
+    beta = np.array([_newton_in_bracket(mu, a + 1e-12, b) for a, b in zip(lo, hi, strict=True)])
     # The traced path's final Newton step (a correction at rounding level).
     c, s, ch, sh = np.cos(beta), np.sin(beta), np.cosh(beta), np.sinh(beta)
     th = np.tanh(beta)
@@ -114,6 +146,13 @@ def _roots_np(mu: float, n_modes: int) -> np.ndarray:
     out = beta - _frequency_function(beta, mu, np) / slope
     out.setflags(write=False)
     return out
+
+
+def host_roots(mu: float, n_modes: int) -> np.ndarray:
+    """:func:`cantilever_roots` of a concrete ``μ ≥ 0`` as a NumPy array (read-only,
+    cached), for host code: without the device transfer of ``cantilever_roots``'s JAX
+    array."""
+    return _roots_np(float(mu), int(n_modes))
 
 
 def cantilever_roots(mu: Scalar | float, n_modes: int = 5) -> PerMode:
