@@ -36,7 +36,7 @@ import numpy as np
 
 from ._core import positions
 from ._problem import ZETA_MAX
-from ._projector import ColumnSubsets, LinearPart, pinv_columns
+from ._projector import ColumnSubsets, LinearPart, pinv_columns, subset_mask
 
 
 def _subset_statistics(lin, r, zs, sizes, known=None, zp=None):
@@ -44,7 +44,7 @@ def _subset_statistics(lin, r, zs, sizes, known=None, zp=None):
     recording or None)}`` over every non-empty subset of the columns of ``zs`` (``known``:
     subsets already computed, ``(T_S, residuals)``; ``zp``: ``lin.project(zs)``, when
     already computed)."""
-    from ._amplitude import _score, test_lags
+    from ._amplitude import _lags_per_recording, _score
 
     out = {idx: (stat, r_alt, None) for idx, (stat, r_alt) in (known or {}).items()}
     # column by column, so each subset's Z⊥ is its columns of it; factored once for all
@@ -55,10 +55,7 @@ def _subset_statistics(lin, r, zs, sizes, known=None, zp=None):
         return out
     # as LinearPart.alternative: the residuals each subset's step leaves
     r_alts = lin.off(r)[None, :] - subsets.steps(todo, r) @ subsets.zp.T
-    lags, start = [], 0  # each recording's lags, all subsets at once
-    for n in sizes:
-        lags.append(test_lags(r_alts[:, start : start + n]))
-        start += n
+    lags = _lags_per_recording(r_alts, sizes)  # each recording's lags, all subsets at once
     white = white_statistics(subsets.zp, r, r_alts, todo)
     for k, idx in enumerate(todo):
         own = [lag[k] for lag in lags]
@@ -98,10 +95,7 @@ def white_statistics(zp, r, r_alts, subsets, *, dof: bool = False):
     v = np.maximum(dm, np.diagonal(white, axis1=1, axis2=2))
     sd = np.sqrt(np.maximum(dm, 1e-300))
     v = meat / (sd[:, :, None] * sd[:, None, :]) * np.sqrt(v[:, :, None] * v[:, None, :])
-    member = np.zeros((len(subsets), k), dtype=bool)
-    for j, idx in enumerate(subsets):
-        member[j, list(idx)] = True
-    keep = member & (np.diagonal(v, axis1=1, axis2=2) > 0)
+    keep = subset_mask(subsets, k) & (np.diagonal(v, axis1=1, axis2=2) > 0)
     v = np.where(keep[:, :, None] & keep[:, None, :], v, np.eye(k))
     s = np.where(keep, zt @ r, 0.0)
     stat = np.einsum("mi,mi->m", s, np.linalg.solve(v, s[:, :, None])[:, :, 0])

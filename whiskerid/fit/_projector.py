@@ -102,9 +102,7 @@ class ColumnSubsets:
         of ``k × k`` matrices serves every subset instead of an SVD call each.
         """
         k = self.r.shape[1]
-        member = np.zeros((len(subsets), k), dtype=bool)
-        for j, idx in enumerate(subsets):
-            member[j, list(idx)] = True
+        member = subset_mask(subsets, k)
         a = np.where(member[:, None, :], self.r[None, :, :], 0.0)
         scale = np.sqrt(np.einsum("mij,mij->mj", a, a))
         scale = np.where(scale > 0, scale, 1.0)
@@ -114,6 +112,14 @@ class ColumnSubsets:
         coef = np.einsum("mji,j->mi", u, self.q.T @ r) * inv
         out = np.einsum("mij,mi->mj", vt, coef) / scale
         return np.where(member, out, 0.0)
+
+
+def subset_mask(subsets, k: int) -> np.ndarray:
+    """``(len(subsets), k)`` booleans: row ``j`` marks the columns of ``subsets[j]``."""
+    member = np.zeros((len(subsets), k), dtype=bool)
+    for j, idx in enumerate(subsets):
+        member[j, list(idx)] = True
+    return member
 
 
 def pinv_columns(a: np.ndarray) -> np.ndarray:
