@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from whiskerid.fit import FitProblem, Observation
+from whiskerid.fit._problem import recording_design
 from whiskerid.fit._start import (
     F_DECAY,
     F_FORCED,
@@ -19,6 +20,7 @@ from whiskerid.fit._start import (
     Z_FORCED,
     Z_POINTS,
     _start_jit,
+    profile_rows,
     start_grid,
     start_values,
 )
@@ -97,6 +99,50 @@ def test_a_sine_keeps_the_geometric_grid():
     assert grid["zeta"].shape == (Z_FORCED,) and int(grid["z_valid"].sum()) == 5
     steps = grid["f_hz"][1:17] / grid["f_hz"][:16]
     assert np.allclose(steps, 2.5 ** (2 / 16)) and np.isclose(np.prod(steps), 6.25)
+
+
+def _kinds():
+    """A pluck read by the ADC (its conversion averaged), a deflection pluck, a sine with a
+    free and a known amplitude, and base motion: every kind of design column."""
+    t = np.arange(300) / 200.0
+    rng = np.random.default_rng(2)
+    y = 100 * np.exp(-t) * np.sin(2 * np.pi * 40.0 * t) + rng.normal(0, 1, t.size)
+    kinds = [
+        Observation(t, y + 10000.0, excitation="decay", observable="adc", gain=None),
+        Observation(t, y, excitation="decay", observable="deflection"),
+        Observation(t, y, excitation="sine", fb_hz=30.0, observable="deflection"),
+        Observation(
+            t, y, excitation="sine", fb_hz=30.0, hb_m=1e-3, observable="deflection", gain=1.0
+        ),
+        Observation(
+            t,
+            y,
+            excitation="base",
+            observable="deflection",
+            gain=1.0,
+            base_acc=np.sin(2 * np.pi * 21.0 * t),
+        ),
+    ]
+    return kinds
+
+
+@pytest.mark.parametrize("kind", range(5))
+def test_the_profiles_rows_are_the_design_transposed(kind):
+    """The start search's design, laid out as rows (samples along the minor axis), holds the
+    numbers of the calibration's own design with its forced response free: same columns,
+    same order, for every excitation and observable."""
+    obs = _kinds()[kind]
+    problem = FitProblem.from_observations(paper_record(), [obs], n_modes=2, pin="geometry")
+    params = problem.zero_params()
+    params["log_kappa"] = params["log_kappa"] + 0.3
+    params["zeta_u"] = params["zeta_u"] - 1.0
+    w = problem.whisker(params)
+    rec = problem.recordings[0]
+    D, _ = recording_design(rec, w, params["recs"][0], profile=True)
+    rows = np.asarray(profile_rows(rec, w))
+    # offset, drift, two modes' cos and sin; a sine's two phases, base motion's response
+    assert rows.shape == (D.shape[1], D.shape[0]) == ((6, 6, 8, 8, 7)[kind], 300)
+    np.testing.assert_allclose(rows, np.asarray(D).T, rtol=1e-13, atol=1e-13)
 
 
 @pytest.mark.slow
