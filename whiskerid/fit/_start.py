@@ -77,24 +77,27 @@ class _Envelope:
             return None
         edges = t[0] + win * np.arange(n_win + 1)
         idx = np.searchsorted(t, edges)
-        # each window's mean square from cumulative sums (a loop over windows took ms)
-        sums = self.sums
+        # each window's mean square from cumulative sums (a loop over windows took ms;
+        # empty windows NaN; a start search asks this of every spectral peak, so no
+        # np.errstate, np.nanmin or np.clip of a scalar: each cost more than the sums)
         count = np.diff(idx)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            rms = np.where(count > 0, np.sqrt(np.maximum(np.diff(sums[idx]), 0.0) / count), np.nan)
+        rms = np.full(count.size, np.nan)
+        np.divide(np.maximum(np.diff(self.sums[idx]), 0.0), count, out=rms, where=count > 0)
+        rms = np.sqrt(rms)
         mid = 0.5 * (edges[:-1] + edges[1:])
-        floor = np.nanmin(rms)
+        floor = np.fmin.reduce(rms)  # the least of the windows that hold samples
         keep = np.isfinite(rms) & (rms > 4 * floor)
         # Use only the first run of windows above the floor (the decay, not later noise bumps).
-        if keep.sum() < 2:
+        if np.count_nonzero(keep) < 2:
             return None
         first = np.flatnonzero(keep)
-        run = first[: np.argmax(np.diff(np.concatenate([first, [first[-1] + 2]])) > 1) + 1]
+        breaks = np.flatnonzero(np.diff(first) > 1)
+        run = first[: breaks[0] + 1] if breaks.size else first
         if run.size < 2:
             return None
         slope = line_fit(mid[run], np.log(rms[run]))[0]
         zeta = -slope / (2 * np.pi * f_true_hz)
-        return float(np.clip(zeta, 1e-4, 0.5)) if np.isfinite(zeta) else None
+        return min(max(zeta, 1e-4), 0.5) if math.isfinite(zeta) else None
 
 
 # --------------------------------------------------------------------------- start grid
