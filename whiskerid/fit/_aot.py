@@ -81,9 +81,9 @@ def cached_call(name: str, fn: Callable, args: tuple, *, static: tuple = ()):
 
 def _packing(leaves: list) -> tuple:
     """How the leaves travel to a program: one flat buffer per dtype, and for each leaf its
-    buffer, offset, size and shape. A call passes each argument to the device on its own
-    (a calibration's 27 leaves took 0.1–0.2 ms of every warm call, one buffer 0.02 ms); the
-    program takes its leaves back by slicing, which moves no number."""
+    buffer, offset, size and shape. A call passes each argument to the device on its own:
+    a calibration's call took 0.36 ms with its 27 leaves, 0.30 ms with one buffer (packed in
+    0.01 ms). The program takes its leaves back by slicing, which moves no number."""
     groups: dict[str, int] = {}
     ends: list[int] = []
     where = []
