@@ -68,13 +68,47 @@ def cached_call(name: str, fn: Callable, args: tuple, *, static: tuple = ()):
     leaves = [np.asarray(x, dtype=_canonical(x)) for x in leaves]
     # the key is a digest of a JSON text (a tenth of a millisecond): kept per structure
     memo = (name, repr(static), treedef, tuple((x.shape, x.dtype.str) for x in leaves))
-    key = _KEYS.get(memo)
-    if key is None:
-        key = _KEYS[memo] = program_key(name, treedef, leaves, static)
+    entry = _KEYS.get(memo)
+    if entry is None:
+        entry = _KEYS[memo] = (program_key(name, treedef, leaves, static), _packing(leaves))
+    key, packing = entry
+    buffers = _pack(leaves, packing)
     program = _PROGRAMS.get(key)
     if program is None:
-        program = _PROGRAMS[key] = _load_or_build(key, fn, treedef, leaves)
-    return program(leaves)
+        program = _PROGRAMS[key] = _load_or_build(key, fn, treedef, packing, buffers)
+    return program(buffers)
+
+
+def _packing(leaves: list) -> tuple:
+    """How the leaves travel to a program: one flat buffer per dtype, and for each leaf its
+    buffer, offset, size and shape. A call passes each argument to the device on its own:
+    a calibration's call took 0.36 ms with its 27 leaves, 0.30 ms with one buffer (packed in
+    0.01 ms). The program takes its leaves back by slicing, which moves no number."""
+    groups: dict[str, int] = {}
+    ends: list[int] = []
+    where = []
+    for x in leaves:
+        g = groups.setdefault(x.dtype.str, len(groups))
+        if g == len(ends):
+            ends.append(0)
+        where.append((g, ends[g], x.size, x.shape))
+        ends[g] += x.size
+    return tuple(where), len(groups)
+
+
+def _pack(leaves: list, packing: tuple) -> list[np.ndarray]:
+    """The flat buffers of ``leaves`` (see :func:`_packing`)."""
+    where, n_buffers = packing
+    parts: list[list[np.ndarray]] = [[] for _ in range(n_buffers)]
+    for x, (g, _, _, _) in zip(leaves, where, strict=True):
+        parts[g].append(x.ravel())
+    return [np.concatenate(p) for p in parts]
+
+
+def _unpack(buffers, packing: tuple) -> list:
+    """The leaves of ``buffers`` (traced, inside the program)."""
+    where, _ = packing
+    return [buffers[g][start : start + size].reshape(shape) for g, start, size, shape in where]
 
 
 def _lighter_exit() -> None:
@@ -156,7 +190,7 @@ def _environment() -> list[str]:
     return _ENVIRONMENT
 
 
-def _load_or_build(key: str, fn: Callable, treedef, leaves: list) -> Callable:
+def _load_or_build(key: str, fn: Callable, treedef, packing: tuple, buffers: list) -> Callable:
     from jax import export
 
     folder = cache_dir()
@@ -169,17 +203,17 @@ def _load_or_build(key: str, fn: Callable, treedef, leaves: list) -> Callable:
             exported = None
     if exported is None:
 
-        def flat(leaves):
-            return fn(*jax.tree_util.tree_unflatten(treedef, leaves))
+        def flat(buffers):
+            return fn(*jax.tree_util.tree_unflatten(treedef, _unpack(buffers, packing)))
 
         # Every custom call (LAPACK on the CPU) is allowed: an artefact is only ever loaded by
         # the same versions of JAX and jaxlib (they are part of its key).
         allow = [export.DisabledSafetyCheck.custom_call("ALL")]
-        exported = export.export(jax.jit(flat), disabled_checks=allow)(leaves)
+        exported = export.export(jax.jit(flat), disabled_checks=allow)(buffers)
         if path is not None:
             _write(path, exported.serialize())
     with _persistent_cache(folder):
-        return jax.jit(exported.call).lower(leaves).compile()
+        return jax.jit(exported.call).lower(buffers).compile()
 
 
 def _write(path: Path, data: bytes) -> None:

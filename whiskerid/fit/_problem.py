@@ -445,26 +445,39 @@ def recording_design(rec: RecordingModel, w: Whisker, rec_params: dict, *, profi
     cols.extend(free_decay_columns(t[:, None], sigma, wd, rec.avg_offsets, sincos=sincos))
     fixed = jnp.zeros_like(t)
     scale = rec.scale  # physical → normalised observed units (gain / std of y)
-    if rec.excitation == "sine":
-        period = 1.0 / rec.fb_hz
-        if rec.forced == "free" or profile:
-            for shift in (0.0, 0.25 * period):
-                c = _averaged(lambda tt, s=shift: _forced_sine(w, rec, tt, s), t, rec.avg_offsets)
-                cols.append((c * scale / _rms(c))[:, None])
-        else:
-            fixed = scale * _averaged(
-                lambda tt: _forced_sine(w, rec, tt, rec_params["tau"]), t, rec.avg_offsets
-            )
+    if rec.forced == "free" or profile:
+        cols.extend(c[:, None] for c in forced_columns(rec, w, t))
+    elif rec.excitation == "sine":
+        fixed = scale * _averaged(
+            lambda tt: _forced_sine(w, rec, tt, rec_params["tau"]), t, rec.avg_offsets
+        )
     elif rec.excitation == "base":
-        state = base_motion_response(w, t, rec.base_acc)
-        resp = _physical(w, rec, state)
-        if rec.avg_offsets is not None:
-            resp = _averaged(lambda tt: jnp.interp(tt, t, resp), t, rec.avg_offsets)
-        if rec.forced == "free" or profile:
-            cols.append((resp * scale / _rms(resp))[:, None])
-        else:
-            fixed = scale * resp
+        fixed = scale * _base_response(w, rec, t)
     return jnp.concatenate(cols, axis=1), fixed
+
+
+def forced_columns(rec: RecordingModel, w: Whisker, t) -> list[Array]:
+    """A forced response as free columns of unit RMS at ``t`` (in normalised observed units):
+    a sine's response and its quarter-period shift, base motion's response; none for a free
+    decay (shared by :func:`recording_design` and the start search's profiles)."""
+    if rec.excitation == "sine":
+        out, period = [], 1.0 / rec.fb_hz
+        for shift in (0.0, 0.25 * period):
+            c = _averaged(lambda tt, s=shift: _forced_sine(w, rec, tt, s), t, rec.avg_offsets)
+            out.append(c * rec.scale / _rms(c))
+        return out
+    if rec.excitation == "base":
+        resp = _base_response(w, rec, t)
+        return [resp * rec.scale / _rms(resp)]
+    return []
+
+
+def _base_response(w: Whisker, rec: RecordingModel, t):
+    state = base_motion_response(w, t, rec.base_acc)
+    resp = _physical(w, rec, state)
+    if rec.avg_offsets is not None:
+        resp = _averaged(lambda tt: jnp.interp(tt, t, resp), t, rec.avg_offsets)
+    return resp
 
 
 # --------------------------------------------------------------------------- building

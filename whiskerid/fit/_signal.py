@@ -4,6 +4,7 @@ Timestamps from a Pi are not uniform; :func:`resample_uniform` puts a signal on 
 uniform grid by linear interpolation before any FFT.
 """
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -56,9 +57,19 @@ def amplitude_spectrum(
     """
     x = np.asarray(x, dtype=float)
     x = x - x.mean()
-    w = np.hanning(x.size) if window == "hann" else np.ones(x.size)
-    spec = np.abs(np.fft.rfft(x * w)) * 2.0 / w.sum()
+    w, w_sum = _window(x.size, window == "hann")
+    spec = np.abs(np.fft.rfft(x * w)) * 2.0 / w_sum
     return np.fft.rfftfreq(x.size, 1.0 / rate_hz), spec
+
+
+@functools.lru_cache(maxsize=8)
+def _window(n: int, hann: bool) -> tuple[np.ndarray, float]:
+    """A Hann (or flat) window of ``n`` samples and its sum, read-only, kept per length: a
+    calibration's start search takes two spectra of each recording, and ``np.hanning``'s
+    cosines cost as much as the FFT."""
+    w = np.hanning(n) if hann else np.ones(n)
+    w.setflags(write=False)
+    return w, w.sum()
 
 
 @dataclass(frozen=True)
