@@ -97,7 +97,7 @@ class _Envelope:
             return None
         slope = line_fit(mid[run], np.log(rms[run]))[0]
         zeta = -slope / (2 * np.pi * f_true_hz)
-        return min(max(zeta, 1e-4), 0.5) if math.isfinite(zeta) else None
+        return float(min(max(zeta, 1e-4), 0.5)) if math.isfinite(zeta) else None
 
 
 # --------------------------------------------------------------------------- start grid
