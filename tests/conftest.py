@@ -65,35 +65,6 @@ def pytest_sessionfinish(session, exitstatus):
         shutil.rmtree(_CACHE, ignore_errors=True)
 
 
-#: The test files that take longest, longest first: seconds of test time in the default run and
-#: in ``pytest -m slow`` (``--durations=0``, 2 cores, 2026-11-27). pytest-xdist hands whole files
-#: to its workers in the order collected (``--dist loadfile --no-loadscope-reorder`` in
-#: ``addopts``); by default it would order them by their number of tests, which put the
-#: one-test files of a minute (the log-polynomial backbone, the free modes' commands) last, and
-#: one worker ran them alone while the other had finished. Longest first, the two end together
-#: (the greedy longest-processing-time order). Files not listed follow in their usual order.
-LONGEST_FIRST = {
-    "default": ("test_features.py", "test_classify.py", "test_fleet.py", "test_posterior.py",
-                "test_release.py", "test_calibrate_checks.py", "test_numpy_classifier.py",
-                "test_calibrate.py", "test_stream.py", "test_exact_model.py",
-                "test_nonlinear.py", "test_grads.py"),
-    "slow": ("test_nonlinear.py", "test_calibrate_compiles.py", "test_calibrate.py",
-             "test_added_mass.py", "test_posterior_grid.py", "test_nl_logpoly.py",
-             "test_classify.py", "test_posterior.py", "test_stream.py", "test_contact_fit.py",
-             "test_calibrate_checks.py", "test_io_cli.py", "test_fleet.py",
-             "test_fleet_driving.py", "test_free_modes_cli.py", "test_contact.py"),
-}  # fmt: skip
-
-
-def pytest_collection_modifyitems(config, items):
-    """Run the longest files first (:data:`LONGEST_FIRST`); a stable sort, so the tests of a
-    file keep their order."""
-    markexpr = (config.getoption("markexpr", "") or "").replace(" ", "")
-    run = "slow" if markexpr == "slow" else "default"
-    rank = {name: k for k, name in enumerate(LONGEST_FIRST[run])}
-    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
-
-
 #: A test process holding more than this after a test frees JAX's compiled code (bytes).
 FREE_ABOVE_BYTES = 600 * 2**20
 
