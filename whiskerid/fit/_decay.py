@@ -29,14 +29,15 @@ def conversion_average(sigma, wd, offsets):
     """``A = mean_k e^{λ o_k}`` (real and imaginary parts) over the averaging offsets.
 
     Args:
-        sigma: Decay rates ``σ`` (1/s), a scalar or one per mode.
+        sigma: Decay rates ``σ`` (1/s): a scalar, one per mode, or one per mode as a column
+            (``(modes, 1)``, for a ``(modes, samples)`` block).
         wd: Damped angular frequencies ``ω_d`` (rad/s), same shape.
         offsets: Times (s) before each sample at which the converter averages, shape ``(k,)``.
 
     Returns:
         ``(Re A, Im A)``, each of the shape of ``sigma`` (at least 1-D).
     """
-    off = jnp.asarray(offsets)[:, None]
+    off = jnp.reshape(jnp.asarray(offsets), (-1,) + (1,) * max(jnp.ndim(sigma), 1))
     e = jnp.exp(-sigma * off)
     return jnp.mean(e * jnp.cos(wd * off), axis=0), jnp.mean(e * jnp.sin(wd * off), axis=0)
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..model import Whisker
 from . import _lsq as _lsq
-from ._decay import conversion_average, decay_rates, free_decay_columns
+from ._decay import decay_rates, free_decay_columns
 from ._observation import Observation
 from ._problem import ZETA_MAX, FitProblem, forced_columns
 from ._signal import amplitude_spectrum, find_peaks, line_fit, resample_uniform
@@ -439,10 +439,7 @@ def profile_rows(rec, w: Whisker):
     span = jnp.maximum(t[-1] - t[0], 1e-12)
     rows = [jnp.ones_like(t)[None, :], ((t - 0.5 * (t[0] + t[-1])) / span)[None, :]]
     sigma, wd = decay_rates(w.omega_rad_s, w.zeta)
-    c, s = free_decay_columns(t[None, :], sigma[:, None], wd[:, None], sincos=sincos)
-    if rec.avg_offsets is not None:  # as free_decay_columns averages them, one row a mode
-        a_re, a_im = conversion_average(sigma, wd, rec.avg_offsets)
-        a_re, a_im = a_re[:, None], a_im[:, None]
-        c, s = c * a_re - s * a_im, s * a_re + c * a_im
+    c, s = free_decay_columns(t[None, :], sigma[:, None], wd[:, None], rec.avg_offsets,
+                              sincos=sincos)  # fmt: skip
     rows += [c, s, *(col[None, :] for col in forced_columns(rec, w, t))]
     return jnp.concatenate(rows, axis=0)
