@@ -198,10 +198,15 @@ def _layout(problem: FitProblem):
         return hit[1]
     leaves, treedef = jax.tree_util.tree_flatten(problem.zero_params())
     layout = ([np.shape(leaf) for leaf in leaves], treedef)
+    _remember(problem, layout, {})
+    return layout
+
+
+def _remember(problem: FitProblem, layout, found: dict) -> None:
+    """Keep ``problem``'s layout and positions, the oldest of the last eight let go."""
     if len(_LAYOUTS) >= 8:
         _LAYOUTS.pop(next(iter(_LAYOUTS)))
-    _LAYOUTS[id(problem)] = (problem, layout, {})
-    return layout
+    _LAYOUTS[id(problem)] = (problem, layout, found)
 
 
 def share_layout(problem: FitProblem, other: FitProblem) -> None:
@@ -211,19 +216,17 @@ def share_layout(problem: FitProblem, other: FitProblem) -> None:
     found by unflattening: 0.2–0.3 ms of a warm fit)."""
     _layout(problem)
     _, layout, found = _LAYOUTS[id(problem)]
-    if len(_LAYOUTS) >= 8:
-        _LAYOUTS.pop(next(iter(_LAYOUTS)))
-    _LAYOUTS[id(other)] = (other, layout, found)
+    _remember(other, layout, found)
 
 
 def positions(problem: FitProblem, name: str) -> np.ndarray:
     """Where parameter ``name`` (a top-level entry, e.g. ``log_kappa``) sits in the flat
     vector: an int array of its shape (kept per problem, as its layout; the score tests ask
     it of every fit, where unflattening a whole step took a tenth of a millisecond)."""
-    _layout(problem)
+    shapes, _ = _layout(problem)
     found = _LAYOUTS[id(problem)][2]
     if name not in found:
-        size = sum(int(np.prod(shape, dtype=int)) for shape in _layout(problem)[0])
+        size = sum(int(np.prod(shape, dtype=int)) for shape in shapes)
         found[name] = np.asarray(unflatten_numpy(problem, np.arange(size))[name])
     return found[name]
 

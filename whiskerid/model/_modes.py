@@ -89,7 +89,7 @@ def _brackets(n_modes: int) -> tuple[np.ndarray, np.ndarray]:
 
 def _frequency_function(beta, mu, xp=jnp):
     """The frequency equation divided by cosh β (same roots, no overflow); ``xp`` is
-    ``jax.numpy`` or ``numpy``."""
+    ``jax.numpy``, ``numpy`` or ``math``."""
     return (
         1.0 / xp.cosh(beta)
         + xp.cos(beta)
@@ -97,12 +97,15 @@ def _frequency_function(beta, mu, xp=jnp):
     )
 
 
+def _frequency_slope(beta, mu, xp=np):
+    """The derivative in β of :func:`_frequency_function`; ``xp`` is ``numpy`` or ``math``."""
+    c, s, ch, th = xp.cos(beta), xp.sin(beta), xp.cosh(beta), xp.tanh(beta)
+    return -th / ch - s + mu * (c * th - s) + mu * beta * (-s * th + c / ch**2 - c)
+
+
 def _value_and_slope(beta: float, mu: float) -> tuple[float, float]:
     """:func:`_frequency_function` and its derivative in β at one point (Python floats)."""
-    c, s, ch, th = math.cos(beta), math.sin(beta), math.cosh(beta), math.tanh(beta)
-    value = 1.0 / ch + c + mu * beta * (c * th - s)
-    slope = -th / ch - s + mu * (c * th - s) + mu * beta * (-s * th + c / ch**2 - c)
-    return value, slope
+    return _frequency_function(beta, mu, math), _frequency_slope(beta, mu, math)
 
 
 def _newton_in_bracket(mu: float, lo: float, hi: float) -> float:
@@ -140,10 +143,7 @@ def _roots_np(mu: float, n_modes: int) -> np.ndarray:
     lo, hi = _brackets(n_modes)
     beta = np.array([_newton_in_bracket(mu, a + 1e-12, b) for a, b in zip(lo, hi, strict=True)])
     # The traced path's final Newton step (a correction at rounding level).
-    c, s, ch, sh = np.cos(beta), np.sin(beta), np.cosh(beta), np.sinh(beta)
-    th = np.tanh(beta)
-    slope = -sh / ch**2 - s + mu * (c * th - s) + mu * beta * (-s * th + c / ch**2 - c)
-    out = beta - _frequency_function(beta, mu, np) / slope
+    out = beta - _frequency_function(beta, mu, np) / _frequency_slope(beta, mu)
     out.setflags(write=False)
     return out
 
