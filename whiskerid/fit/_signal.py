@@ -81,10 +81,11 @@ def amplitude_spectrum(
     return np.fft.rfftfreq(x.size, 1.0 / rate_hz), spec
 
 
-@functools.lru_cache(maxsize=8)
+@functools.lru_cache(maxsize=32)
 def _window(n: int, hann: bool) -> tuple[np.ndarray, float]:
     """A Hann (or flat) window of ``n`` samples and its sum, read-only, kept per length: a
-    calibration's start search takes two spectra of each recording, and ``np.hanning``'s
+    calibration's start search takes two spectra of each recording, its checks a
+    periodogram of the recording and Welch segments of the residual, and ``np.hanning``'s
     cosines cost as much as the FFT."""
     w = np.hanning(n) if hann else np.ones(n)
     w.setflags(write=False)
