@@ -12,7 +12,8 @@ import pytest
 
 import whiskerid as wi
 from whiskerid.fit import _core
-from whiskerid.fit._calibrate import _moments, _per_recording
+from whiskerid.fit._calibrate import _per_recording
+from whiskerid.fit._checks import moments
 from whiskerid.fit._problem import FitProblem
 from whiskerid.fit._signal import line_fit, median
 from whiskerid.fit._start import _Envelope
@@ -160,5 +161,5 @@ def test_moments_passed_in_give_the_same_diagnostics():
               for r in problem.recordings]  # fmt: skip
     resid = np.zeros(t.size)
     a, _, _ = _per_recording(problem, opt, obs, models, resid)
-    b, _, _ = _per_recording(problem, opt, obs, models, resid, None, _moments(obs))
+    b, _, _ = _per_recording(problem, opt, obs, models, resid, None, moments(obs))
     assert a == b and a[0]["rms_signal"] == float(np.std(y))

@@ -58,6 +58,7 @@ from ._checks import (
     robust_covariance,
 )
 from ._checks import lag1 as lag1_autocorr
+from ._checks import moments as recording_moments
 from ._core import GTOL as GTOL
 from ._core import fit_problem, solve_status
 from ._host_whisker import nominal_whisker
@@ -264,7 +265,7 @@ def calibrate(
         raise CalibrationError(f"solver must be one of {', '.join(SOLVERS)}; got {solver!r}")
     res = fit_problem(problem, obs, nominal, solver=solver, max_steps=max_steps,
                       f1_start_hz=f1_start_hz, start=start,
-                      meanwhile=lambda: (data_side(obs), _moments(obs)))  # fmt: skip
+                      meanwhile=lambda: (data_side(obs), recording_moments(obs)))  # fmt: skip
     (peak_refs, rates), moments = res.meanwhile
     problem, resid_w, jac, bread, s2 = res.problem, res.resid, res.jac, res.bread, res.s2
     cov = s2 * bread
@@ -472,21 +473,15 @@ def _poor_fit_warnings(per_rec: list[dict]) -> list[str]:
     ]
 
 
-def _moments(obs) -> list[tuple[float, float]]:
-    """Each recording's mean and standard deviation (read by :func:`_per_recording`; a
-    calibration computes them while its compiled program runs)."""
-    return [(float(np.mean(o.y)), float(np.std(o.y))) for o in obs]
-
-
 def _per_recording(problem: FitProblem, optimum, obs, models, resid, peak_refs=None,
                    moments=None):  # fmt: skip
     """Nuisances and residual diagnostics per recording, the curves for plots, and the
     weighted residual vector (``models``: each recording's normalised model and its modal
     parts, from the compiled fit; ``peak_refs``: :func:`_checks.peak_reference` of each
-    recording, ``moments``: :func:`_moments`, when already computed)."""
+    recording, ``moments``: :func:`_checks.moments`, when already computed)."""
     out, curves = [], []
     peak_refs = peak_refs or [None] * len(obs)
-    moments = moments or _moments(obs)
+    moments = moments or recording_moments(obs)
     for spec, rec, (model_n, modal), o, ref, (y_mean, y_std) in zip(
         problem.recordings, optimum["recs"], models, obs, peak_refs, moments, strict=True
     ):

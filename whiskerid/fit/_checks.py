@@ -360,6 +360,12 @@ def decay_rates(observations) -> list[float]:
     return [timestamp_rate(o.t, where=o.name) for o in observations if o.excitation == "decay"]
 
 
+def moments(obs) -> list[tuple[float, float]]:
+    """Each recording's mean and standard deviation (what a calibration's per-recording
+    report reads of the data alone; computed while its compiled program runs)."""
+    return [(float(np.mean(o.y)), float(np.std(o.y))) for o in obs]
+
+
 def data_side(obs) -> tuple[list, list[float]]:
     """What the checks read of the recordings alone (:func:`peak_reference` of each, the free
     decays' sampling rates, :func:`decay_rates`): a calibration computes it while its compiled
