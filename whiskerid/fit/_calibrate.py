@@ -58,6 +58,7 @@ from ._checks import (
     robust_covariance,
 )
 from ._checks import lag1 as lag1_autocorr
+from ._checks import moments as recording_moments
 from ._core import GTOL as GTOL
 from ._core import fit_problem, solve_status
 from ._host_whisker import nominal_whisker
@@ -264,8 +265,8 @@ def calibrate(
         raise CalibrationError(f"solver must be one of {', '.join(SOLVERS)}; got {solver!r}")
     res = fit_problem(problem, obs, nominal, solver=solver, max_steps=max_steps,
                       f1_start_hz=f1_start_hz, start=start,
-                      meanwhile=lambda: data_side(obs))  # fmt: skip
-    peak_refs, rates = res.meanwhile
+                      meanwhile=lambda: (data_side(obs), recording_moments(obs)))  # fmt: skip
+    (peak_refs, rates), moments = res.meanwhile
     problem, resid_w, jac, bread, s2 = res.problem, res.resid, res.jac, res.bread, res.s2
     cov = s2 * bread
     # The solver's own test (steps below rtol 1e-10 of every parameter) can stall at
@@ -276,7 +277,7 @@ def calibrate(
 
     optimum = res.optimum
     per_rec, curves, resid = _per_recording(problem, optimum, obs, res.models, resid_w,
-                                            peak_refs)  # fmt: skip
+                                            peak_refs, moments)  # fmt: skip
     uncertainty = "white noise: s^2 (J^T J)^-1"
     cov_white = cov
     if ok:  # a sandwich where the residuals are correlated or their spread changes
@@ -472,16 +473,18 @@ def _poor_fit_warnings(per_rec: list[dict]) -> list[str]:
     ]
 
 
-def _per_recording(problem: FitProblem, optimum, obs, models, resid, peak_refs=None):
+def _per_recording(problem: FitProblem, optimum, obs, models, resid, peak_refs=None,
+                   moments=None):  # fmt: skip
     """Nuisances and residual diagnostics per recording, the curves for plots, and the
     weighted residual vector (``models``: each recording's normalised model and its modal
     parts, from the compiled fit; ``peak_refs``: :func:`_checks.peak_reference` of each
-    recording, when already computed)."""
+    recording, ``moments``: :func:`_checks.moments`, when already computed)."""
     out, curves = [], []
     peak_refs = peak_refs or [None] * len(obs)
-    for spec, rec, (model_n, modal), o, ref in zip(problem.recordings, optimum["recs"], models,
-                                                   obs, peak_refs, strict=True):  # fmt: skip
-        y_mean, y_std = float(np.mean(o.y)), float(np.std(o.y))
+    moments = moments or recording_moments(obs)
+    for spec, rec, (model_n, modal), o, ref, (y_mean, y_std) in zip(
+        problem.recordings, optimum["recs"], models, obs, peak_refs, moments, strict=True
+    ):
         model = model_n * y_std + y_mean
         r = o.y - model
         lag1 = lag1_autocorr(r)
@@ -489,6 +492,7 @@ def _per_recording(problem: FitProblem, optimum, obs, models, resid, peak_refs=N
         nm = problem.n_modes
         amps = np.hypot(c[2 : 2 + nm], c[2 + nm : 2 + 2 * nm]) * y_std
         modal_rms = [float(v) for v in np.sqrt(np.mean(modal**2, axis=0)) * y_std]
+        rms = np.sqrt(np.mean(r**2))
         info = {
             "name": o.name,
             "source": o.source,
@@ -496,9 +500,9 @@ def _per_recording(problem: FitProblem, optimum, obs, models, resid, peak_refs=N
             "observable": o.observable,
             "n_samples": int(o.t.size),
             "t_start_s": float(o.t[0]),
-            "rms_residual": float(np.sqrt(np.mean(r**2))),
+            "rms_residual": float(rms),
             "rms_signal": y_std,
-            "snr_db": float(20 * np.log10(y_std / max(np.sqrt(np.mean(r**2)), 1e-300))),
+            "snr_db": float(20 * np.log10(y_std / max(rms, 1e-300))),
             "lag1_autocorr": lag1,
             "residual_peak": residual_peak(o.t, r, o.y, data=ref),
             "selection": o.selection,

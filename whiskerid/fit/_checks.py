@@ -36,7 +36,7 @@ import numpy as np
 from ..io import timestamp_rate
 from ._problem import ZETA_MAX
 from ._release import quantum
-from ._signal import line_fit
+from ._signal import _window, line_fit, median
 
 #: Lag-1 autocorrelation of the residuals above which they are not treated as white noise.
 LAG1_MAX = 0.5
@@ -65,9 +65,9 @@ def peak_reference(t: np.ndarray, y: np.ndarray | None = None) -> tuple:
     of its converter and the data's own periodogram (a calibration computes these while
     its compiled program runs)."""
     n = np.size(t)
-    dt = float(np.median(np.diff(t)))
+    dt = float(median(np.diff(t)))
     grid = t[0] + dt * np.arange(n)
-    window = np.hanning(n)
+    window = _window(n, True)[0]  # kept per length, read-only (as the start's spectra)
     if y is None:
         return dt, grid, window, None, None
     y = np.asarray(y, dtype=float)
@@ -98,7 +98,7 @@ def residual_peak(
         return None
     dt, grid, window, rounding, p_data = peak_reference(t, y) if data is None else data
     p = _periodogram(np.interp(grid, t, r), window)
-    floor = float(np.median(p))
+    floor = float(median(p))
     if rounding is not None:
         floor = max(floor, rounding)
     if floor <= 0:
@@ -358,6 +358,12 @@ def decay_rates(observations) -> list[float]:
     """Sampling rates (Hz, :func:`whiskerid.io.timestamp_rate`) of the free-decay
     observations."""
     return [timestamp_rate(o.t, where=o.name) for o in observations if o.excitation == "decay"]
+
+
+def moments(obs) -> list[tuple[float, float]]:
+    """Each recording's mean and standard deviation (what a calibration's per-recording
+    report reads of the data alone; computed while its compiled program runs)."""
+    return [(float(np.mean(o.y)), float(np.std(o.y))) for o in obs]
 
 
 def data_side(obs) -> tuple[list, list[float]]:

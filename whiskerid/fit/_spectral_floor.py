@@ -33,6 +33,7 @@ and where.
 import numpy as np
 
 from ._fdist import f_sf
+from ._signal import _window, median
 
 #: Welch segment length in periods of the lowest fitted mode.
 PERIODS = 32
@@ -53,7 +54,7 @@ def welch_psd(x, dt: float, nseg: int) -> tuple[np.ndarray, np.ndarray, int]:
     x = np.asarray(x, dtype=float)
     step = max(nseg // 2, 1)
     starts = np.arange(0, x.size - nseg + 1, step)
-    w = np.hanning(nseg)
+    w = _window(nseg, True)[0]  # kept per length, read-only
     s = np.arange(nseg) - (nseg - 1) / 2
     if starts.size:  # every segment at once (one FFT call, not one per segment)
         segs = np.lib.stride_tricks.sliding_window_view(x, nseg)[starts]
@@ -67,8 +68,9 @@ def welch_psd(x, dt: float, nseg: int) -> tuple[np.ndarray, np.ndarray, int]:
 
 def _uniform(t, r):
     t, r = np.asarray(t, float), np.asarray(r, float)
-    dt = float(np.median(np.diff(t)))
-    if np.all(np.abs(np.diff(t) - dt) <= 1e-6 * abs(dt)):  # np.allclose's test, its cost less
+    steps = np.diff(t)
+    dt = float(median(steps))
+    if np.all(np.abs(steps - dt) <= 1e-6 * abs(dt)):  # np.allclose's test, its cost less
         return r, dt
     return np.interp(t[0] + dt * np.arange(t.size), t, r), dt
 
@@ -128,7 +130,7 @@ def spectral_whiteness(t, residual, lines_hz, *, quiet=None) -> dict:
             nu_ref = _dof(k, nf)
             # the median of χ²_ν/ν is about (1 − 2/(9ν))³ of its mean
             nu_bin = _dof(k, 1) * 2.0
-            ref = float(np.median(p[flank])) / (1 - 2 / (9 * nu_bin)) ** 3
+            ref = float(median(p[flank])) / (1 - 2 / (9 * nu_bin)) ** 3
             nu_ref *= 2 / np.pi  # a median is less efficient than a mean
         nu_r = _dof(k, nb)
         ratio = float(p[band].mean() / max(ref, 1e-300))

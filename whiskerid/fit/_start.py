@@ -18,7 +18,7 @@ from . import _lsq as _lsq
 from ._decay import decay_rates, free_decay_columns
 from ._observation import Observation
 from ._problem import ZETA_MAX, FitProblem, forced_columns
-from ._signal import amplitude_spectrum, find_peaks, line_fit, resample_uniform
+from ._signal import amplitude_spectrum, find_peaks, line_fit, median, resample_uniform
 from ._trig import sincos
 
 
@@ -55,7 +55,7 @@ def envelope_zeta(t: np.ndarray, y: np.ndarray, f_obs_hz: float, f_true_hz: floa
     RMS over consecutive windows of about four periods of the observed (possibly aliased)
     frequency; windows near the noise floor are dropped; ``ζ = −slope/(2π f)``.
     """
-    return _Envelope(t, y - np.median(y)).zeta(f_obs_hz, f_true_hz)
+    return _Envelope(t, y - median(y)).zeta(f_obs_hz, f_true_hz)
 
 
 class _Envelope:
@@ -66,7 +66,7 @@ class _Envelope:
     def __init__(self, t: np.ndarray, y: np.ndarray, dt: float | None = None):
         self.t = t
         self.span = t[-1] - t[0]
-        self.dt = float(np.median(np.diff(t))) if dt is None else dt  # the median step
+        self.dt = float(median(np.diff(t))) if dt is None else dt  # the median step
         self.sums = np.concatenate([[0.0], np.cumsum(y**2)])
 
     def zeta(self, f_obs_hz: float, f_true_hz: float) -> float | None:
@@ -81,20 +81,24 @@ class _Envelope:
         # empty windows NaN; a start search asks this of every spectral peak, so no
         # np.errstate, np.nanmin or np.clip of a scalar: each cost more than the sums)
         count = np.diff(idx)
-        rms = np.full(count.size, np.nan)
-        np.divide(np.maximum(np.diff(self.sums[idx]), 0.0), count, out=rms, where=count > 0)
+        ms = np.maximum(np.diff(self.sums[idx]), 0.0)
+        if count.all():  # the usual case (windows of 12 samples or more): no empty window
+            rms = ms / count
+        else:
+            rms = np.full(count.size, np.nan)
+            np.divide(ms, count, out=rms, where=count > 0)
         rms = np.sqrt(rms)
         mid = 0.5 * (edges[:-1] + edges[1:])
         floor = np.fmin.reduce(rms)  # the least of the windows that hold samples
         keep = np.isfinite(rms) & (rms > 4 * floor)
-        # Use only the first run of windows above the floor (the decay, not later noise bumps).
-        if np.count_nonzero(keep) < 2:
+        # Use only the first run of windows above the floor (the decay, not later noise
+        # bumps): from the first kept window to the first one left out after it (argmin of
+        # the booleans; 0 where all are kept), as slices.
+        start = int(keep.argmax())
+        length = int(keep[start:].argmin()) or keep.size - start
+        if not keep[start] or length < 2:
             return None
-        first = np.flatnonzero(keep)
-        breaks = np.flatnonzero(np.diff(first) > 1)
-        run = first[: breaks[0] + 1] if breaks.size else first
-        if run.size < 2:
-            return None
+        run = slice(start, start + length)
         slope = line_fit(mid[run], np.log(rms[run]))[0]
         zeta = -slope / (2 * np.pi * f_true_hz)
         return float(min(max(zeta, 1e-4), 0.5)) if math.isfinite(zeta) else None
@@ -183,13 +187,13 @@ def start_grid(
     lo, hi = f1_nom / 2.5, f1_nom * 2.5
     spectral, rates, nyquist = _spectral_candidates(observations, f1_nom, lo, hi)
     envelopes = [r / (2 * np.pi * f) for f, r, true in spectral if true and r is not None]
-    zeta_env = float(np.median(envelopes)) if envelopes else 2 * zeta_nom
+    zeta_env = float(median(envelopes)) if envelopes else 2 * zeta_nom
     if all(r.excitation == "decay" for r in problem.recordings):
         f_cands = _unique([f for f, _, _ in spectral])[:F_DECAY]
         steps = [f1_nom * 1.25**k for k in (0, -1, 1, -2, 2, -3, 3, -4)]
         f_cands += steps[: F_DECAY - len(f_cands)]
         # each candidate's own ζ: the envelope's decay rate σ = ζ ω at that frequency
-        rate = float(np.median(rates)) if rates else None
+        rate = float(median(rates)) if rates else None
         zeta1 = [[rate / (2 * np.pi * f) if rate else zeta_nom] for f in f_cands]
         z_cands = [zeta_nom, zeta_env, zeta_env / 2, zeta_env * 2]
         nf, nz = F_DECAY, Z_DECAY
@@ -250,8 +254,8 @@ def _spectral_candidates(observations, f1_nom, lo, hi):
         # Both windows: a pluck that dies out within the first few percent of the record is
         # below the noise in the Hann-windowed spectrum (the start then rested on the grid
         # alone and picked an aliased higher mode in 5 of 200 seeded trials).
-        yc = o.y - np.median(o.y)
-        dt = float(np.median(np.diff(o.t)))  # once for the grid and the envelope
+        yc = o.y - median(o.y)
+        dt = float(median(np.diff(o.t)))  # once for the grid and the envelope
         _, yu, rate = resample_uniform(o.t, yc, 1.0 / dt)
         peaks = spectral_peaks_uniform(yu, rate) + spectral_peaks_uniform(yu, rate, "none")
         nyquist = rate / 2 if not np.isfinite(nyquist) else max(nyquist, rate / 2)
