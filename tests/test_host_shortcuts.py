@@ -6,12 +6,10 @@ structure against the layout of its own zero parameters; a recording's moments c
 while the compiled program runs against those computed after it.
 """
 
-import jax
 import numpy as np
 import pytest
 
 import whiskerid as wi
-from whiskerid.fit import _core
 from whiskerid.fit._calibrate import _per_recording
 from whiskerid.fit._checks import moments
 from whiskerid.fit._problem import FitProblem
@@ -93,58 +91,6 @@ def test_the_envelopes_first_run_by_slices_is_the_index_arrays(seed):
     assert got is not None and got == _zeta_as_indices(env, 30.0, 30.0)
     flat = _Envelope(t, np.ones_like(t))  # no window above four times the quietest
     assert flat.zeta(30.0, 30.0) is None and _zeta_as_indices(flat, 30.0, 30.0) is None
-
-
-def _problem(n_modes=2, zeta_per_mode=False, n_recs=1, seed=0):
-    rng = np.random.default_rng(seed)
-    t = np.arange(400) / 200.0
-    y = np.exp(-0.5 * t) * np.sin(2 * np.pi * 23.0 * t) + rng.normal(0, 1e-3, t.size)
-    obs = [wi.Observation(t, y, excitation="decay", observable="deflection", gain=1.0)] * n_recs
-    return FitProblem.from_observations(
-        wi.paper_record(), obs, n_modes=n_modes, zeta_per_mode=zeta_per_mode
-    )
-
-
-@pytest.mark.parametrize(
-    ("n_modes", "zeta_per_mode", "n_recs"), [(2, False, 1), (2, True, 1), (1, False, 2)]
-)
-def test_a_layout_kept_by_structure_is_the_problems_own(n_modes, zeta_per_mode, n_recs):
-    """A new problem of a structure seen before takes the kept layout and positions: they
-    equal its own zero parameters' flattening and unflattening, for other structures too
-    (ζ per mode, one mode and two recordings), which keep layouts of their own."""
-    first = _problem(n_modes, zeta_per_mode, n_recs, seed=1)
-    _core._layout(first)
-    second = _problem(n_modes, zeta_per_mode, n_recs, seed=2)
-    assert _core._structure(second) == _core._structure(first)
-    shapes, treedef = _core._layout(second)
-    leaves, want_def = jax.tree_util.tree_flatten(second.zero_params())
-    assert treedef == want_def and shapes == [np.shape(leaf) for leaf in leaves]
-    flat = np.arange(second.flatten(second.zero_params()).size, dtype=float)
-    plain = second.unflatten(flat)
-    for name in ("log_kappa", "zeta_u"):
-        np.testing.assert_array_equal(_core.positions(second, name), np.asarray(plain[name]))
-    got = _core.unflatten_numpy(second, flat)
-    assert jax.tree_util.tree_all(jax.tree_util.tree_map(np.array_equal, got, plain))
-    other = _problem(3 - n_modes, not zeta_per_mode, n_recs)
-    assert _core._structure(other) != _core._structure(first)
-    assert _core._layout(other)[1] == jax.tree_util.tree_structure(other.zero_params())
-
-
-def test_a_subclass_keeps_no_layout_by_structure():
-    """A problem of another class may have parameters of its own: no structure key, its
-    layout computed from its own zero parameters."""
-
-    class Wider(FitProblem):
-        def zero_params(self):
-            return {**super().zero_params(), "extra": np.zeros(3)}
-
-    plain = _problem()
-    wide = Wider(**{k: v for k, v in vars(plain).items()})
-    assert _core._structure(wide) is None
-    shapes, _ = _core._layout(wide)
-    assert sum(int(np.prod(s, dtype=int)) for s in shapes) == 3 + sum(
-        int(np.prod(s, dtype=int)) for s in _core._layout(plain)[0]
-    )
 
 
 def test_moments_passed_in_give_the_same_diagnostics():

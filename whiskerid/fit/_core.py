@@ -191,41 +191,14 @@ def unflatten_numpy(problem: FitProblem, flat: np.ndarray) -> dict:
 _LAYOUTS: dict[int, tuple] = {}
 
 
-#: Layouts (and positions found) by the structure that decides them (:func:`_structure`):
-#: each calibration builds a new problem, and warm fits of the same kind of recordings
-#: share one layout (flattening zero parameters and finding two positions again took
-#: 0.08 ms a fit). Never more than a few kinds in a session; bounded anyway.
-_STRUCTURES: dict[tuple, tuple] = {}
-
-
-def _structure(problem: FitProblem) -> tuple | None:
-    """What :meth:`FitProblem.zero_params` reads of ``problem`` (its modes, ζ per mode, a
-    static test, each recording's linear columns, forcing and excitation), or None for a
-    subclass, whose parameters may depend on more."""
-    if type(problem) is not FitProblem:
-        return None
-    recs = tuple((r.n_cols, r.forced, r.excitation) for r in problem.recordings)
-    return (problem.n_modes, problem.zeta_per_mode, problem.static_test is not None, recs)
-
-
 def _layout(problem: FitProblem):
     """``(leaf shapes, treedef)`` of ``problem.zero_params()``."""
     hit = _LAYOUTS.get(id(problem))
     if hit is not None and hit[0] is problem:
         return hit[1]
-    key = _structure(problem)
-    if key is not None and key in _STRUCTURES:
-        layout, found = _STRUCTURES[key]
-        _remember(problem, layout, found)
-        return layout
     leaves, treedef = jax.tree_util.tree_flatten(problem.zero_params())
     layout = ([np.shape(leaf) for leaf in leaves], treedef)
-    found = {}
-    if key is not None:
-        if len(_STRUCTURES) >= 32:
-            _STRUCTURES.pop(next(iter(_STRUCTURES)))
-        _STRUCTURES[key] = (layout, found)
-    _remember(problem, layout, found)
+    _remember(problem, layout, {})
     return layout
 
 
