@@ -14,10 +14,13 @@ cache key costs. A second peer is SciPy: ``benchmarks/scipy_pluck.py``'s fit (th
 offset, drift, two modes with f_2 tied to f_1, the ADS1115's conversion averaged; started at
 the largest spectral peak below the Nyquist frequency) on the same recordings, with its time per
 fit and its errors; both are counted right when f_1 is within 0.1 % of the truth. Each
-whisker is fitted by us and then by SciPy, in turn, so that a drift of the machine's speed
-reaches both alike; ``--rounds`` passes over the whiskers give the warm pairs (our first
-fit, which compiles or loads the program, is reported apart), and ``warm_over_scipy`` is the
-ratio of the two medians (``warm_over_scipy_paired_median``: the median of the pairs' ratios).
+round fits every whisker by us and then every whisker by SciPy, so that a drift of the
+machine's speed reaches both alike over ``--rounds`` rounds; the warm pairs (a whisker's two
+fits in one round; our first fit, which compiles or loads the program, is reported apart)
+give ``warm_over_scipy``, the ratio of the two medians, and
+``warm_over_scipy_paired_median``, the median of the pairs' ratios. (Fits alternated one by
+one would not do: after a call SciPy's two BLAS threads spin for a while on the core our next
+fit needs, and our CPU time counted them.)
 
 Run: ``python benchmarks/calibrate_many.py [--whiskers N] [--duration S] [--rounds R]``
 (prints JSON).
@@ -111,14 +114,19 @@ def main() -> None:
                        conversion_s=rec.adc.conversion_time_s)  # fmt: skip
         return sp, time.perf_counter() - t0, time.process_time() - c0
 
-    # Each whisker fitted by us, then by SciPy, in turn: a drift of the machine's speed (other
-    # processes, the clock) reaches both alike. Later rounds repeat the warm pairs.
+    # Rounds of our fits of every whisker, then SciPy's of every whisker: a drift of the
+    # machine's speed (other processes, the clock) reaches both alike over the rounds, and
+    # neither runs right after the other's fit (SciPy's two BLAS threads keep spinning for a
+    # while after a call, on the core our fit would have).
     times, cpu, compiles, f1_err, zeta_err, ok, status = [], [], [], [], [], [], []
     scipy_times, scipy_cpu, scipy_f1_err, ratios = [], [], [], []
+    pairs = list(zip(records, observations, strict=True))
     for rnd in range(args.rounds):
-        for k, (rec, obs) in enumerate(zip(records, observations, strict=True)):
-            cal, dt, dc, n_comp = ours(rec, obs)
-            sp, st, sc = scipy(rec, obs)
+        ours_round = [ours(rec, obs) for rec, obs in pairs]
+        scipy_round = [scipy(rec, obs) for rec, obs in pairs]
+        for k, ((cal, dt, dc, n_comp), (sp, st, sc), (rec, _)) in enumerate(
+            zip(ours_round, scipy_round, pairs, strict=True)
+        ):
             compiles.append(n_comp)  # every round's: none after the first fit
             if rnd == 0:
                 w = rec.whisker()
