@@ -1,9 +1,8 @@
 """A warm calibration's host-side shortcuts give what they replace, to the last bit.
 
 The median by partition against ``np.median``; the envelope's first run of windows found by
-slices against the index arrays it replaced; a parameter layout kept by a problem's
-structure against the layout of its own zero parameters; a recording's moments computed
-while the compiled program runs against those computed after it.
+slices against the index arrays it replaced; a recording's moments computed while the
+compiled program runs against those computed after it.
 """
 
 import numpy as np
