@@ -89,6 +89,31 @@ def test_the_spectrum_puts_a_candidate_on_f1_with_its_own_zeta(rate, f1, zeta):
     assert abs(grid["zeta1"][best, 0] / zeta - 1) < 0.35, (grid["zeta1"][best], zeta)
 
 
+def test_an_alias_in_the_grid_comes_with_its_line_below_the_nyquist_frequency():
+    """Strongly damped plucks near the Nyquist frequency, the record 30 % high (nearer the
+    alias than the line): a broad, noisy peak gives several spectral peaks, each entered as
+    the line and as its alias nearest the record, more than the grid's slots. Wherever an
+    alias is in the grid, so is its mirror below the Nyquist frequency (when within the
+    search range), which the search prefers among equal costs; before, the last slot could
+    take an alias alone (15 of these 60 grids), and a 10 s pluck of a coil whisker at
+    87 Hz was fitted on its alias at 113 Hz."""
+    lone = []
+    for (f1, zeta), seed in itertools.product(
+        ((87.2, 0.04), (80.0, 0.04), (86.0, 0.06), (90.0, 0.03), (75.0, 0.05)), range(12)
+    ):
+        obs = _pluck(200.0, f1, zeta, seed=seed)
+        problem, whisker = _problem(obs, _record(1.3 * f1))
+        grid = start_grid(problem, [obs], whisker)
+        f = grid["f_hz"][grid["f_valid"] > 0]
+        nyquist, ref = float(grid["nyquist_hz"]), float(grid["f_ref_hz"])
+        assert abs(nyquist - 100.0) < 1e-9 and f.size == F_DECAY  # every slot taken
+        for alias in f[f > nyquist]:
+            mirror = 2 * nyquist - alias
+            if ref / 2.5 <= mirror <= ref * 2.5 and not np.any(np.abs(f - mirror) <= 5e-3 * mirror):
+                lone.append((f1, zeta, seed, float(alias)))
+    assert not lone, lone
+
+
 def test_a_sine_keeps_the_geometric_grid():
     """Without a free decay the spectrum does not say where f_1 is: the 17 geometric steps,
     with the record's five ζ in the second stage, in a grid of its own size."""

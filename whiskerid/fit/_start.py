@@ -272,8 +272,11 @@ def _spectral_candidates(observations, f1_nom, lo, hi):
                 if sigma is not None and first:
                     rates.append(sigma)
                     first = False
+            # The line first, then its alias: where the grid has no slot left for both
+            # (F_DECAY), the line below the Nyquist frequency stays, so that an alias in the
+            # grid always has its mirror there (start_from_grid prefers the mirror).
             out.extend(
-                (f, sigma, f == f_true) for f in dict.fromkeys((f_true, fp)) if lo <= f <= hi
+                (f, sigma, f == f_true) for f in dict.fromkeys((fp, f_true)) if lo <= f <= hi
             )
     return out, rates, nyquist
 
