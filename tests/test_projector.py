@@ -2,11 +2,13 @@
 the joint least-squares solve's, which the score tests used to compute one by one."""
 
 import numpy as np
+import pytest
 
 from whiskerid.fit._amplitude import test_lags as lags_of
 from whiskerid.fit._checks import lag_below
 from whiskerid.fit._model_error import step_map
 from whiskerid.fit._projector import ColumnSubsets, LinearPart, pinv_columns
+from whiskerid.fit._signal import fast_length
 
 
 def _problem(seed=0, n=400, p=6, k=3):
@@ -103,10 +105,13 @@ def test_white_statistics_are_the_score_tests_statistics_without_lags():
     assert min(stats[k] for k in (0, 2, 3)) > 0
 
 
-def test_lag_below_is_where_the_tail_of_the_autocorrelation_stays_below_the_limit():
+@pytest.mark.parametrize("n", [300, 1009])
+def test_lag_below_is_where_the_tail_of_the_autocorrelation_stays_below_the_limit(n):
+    """Against the autocorrelation summed lag by lag; at 1009 samples (prime) the
+    transform's length is not 2n but the next length of small prime factors (2025)."""
     rng = np.random.default_rng(7)
-    rows = [rng.standard_normal(300), np.cumsum(rng.standard_normal(300)),
-            np.sin(0.3 * np.arange(300)) + 0.05 * rng.standard_normal(300)]  # fmt: skip
+    rows = [rng.standard_normal(n), np.cumsum(rng.standard_normal(n)),
+            np.sin(0.3 * np.arange(n)) + 0.05 * rng.standard_normal(n)]  # fmt: skip
     for row in rows:
         rc = row - row.mean()
         acf = np.correlate(rc, rc, "full")[row.size - 1 :] / (rc @ rc)
@@ -115,3 +120,16 @@ def test_lag_below_is_where_the_tail_of_the_autocorrelation_stays_below_the_limi
             want = int(np.argmax(tail < limit)) if np.any(tail < limit) else row.size
             assert lag_below(row, limit) == want
     assert lag_below(rows[1], 0.1) > 10 and lag_below(rows[0], 0.3) == 1
+
+
+def test_the_fast_length_is_the_next_length_of_factors_2_3_and_5():
+    def smooth(m):
+        for p in (2, 3, 5):
+            while m % p == 0:
+                m //= p
+        return m == 1
+
+    for n in range(1, 3000):
+        want = next(m for m in range(n, 2 * n + 1) if smooth(m))
+        assert fast_length(n) == want, n
+    assert fast_length(2 * 158_988) == 320_000  # 2n = 2³·3·13 249
