@@ -3,10 +3,11 @@
 Fits real and simulated free decays of about 10 k, 40 k, 160 k and 640 k samples, each in its
 own child process (so that its peak RSS, ``resource.getrusage``, is its own), and prints one
 JSON object with, per case: samples fitted, release detection time, the calibration's time
-cold (compiling) and warm (the same shapes again), the HAC covariance's time, the child's peak
-RSS, and side by side the peer: the Newey–West sum written lag by lag (the ``O(n L p²)`` form
-this project used before, with the same lag ``L``) on the same scores, where it finishes
-within ``--peer-budget`` seconds (estimated from the smaller sizes).
+cold (compiling, into an empty compilation cache of the child's own) and warm (the same
+shapes again), the HAC covariance's time, the child's peak RSS, and side by side the peer:
+the Newey–West sum written lag by lag (the ``O(n L p²)`` form this project used before, with
+the same lag ``L``) on the same scores, where it finishes within ``--peer-budget`` seconds
+(estimated from the smaller sizes).
 
 Recordings:
 
@@ -32,9 +33,11 @@ Timings depend on the machine and its load: compare figures of one run only.
 
 import argparse
 import json
+import os
 import resource
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -178,9 +181,13 @@ def main(argv=None) -> int:
             cmd = [sys.executable, __file__, "--child", source, str(n), "--data", str(args.data)]
             cmd += ["--peer"] * peer + ["--no-warm"] * args.no_warm
             print(f"{source} {n}: ...", file=sys.stderr, flush=True)
-            t0 = time.perf_counter()
-            proc = subprocess.run(cmd, capture_output=True, text=True)
-            wall = time.perf_counter() - t0
+            # an empty compilation cache of its own: "cold" compiles, whatever the user's
+            # cache folder already holds from an earlier run
+            with tempfile.TemporaryDirectory(prefix="whiskerid-scaling-") as cache:
+                env = {**os.environ, "WHISKERID_COMPILE_CACHE": cache}
+                t0 = time.perf_counter()
+                proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
+                wall = time.perf_counter() - t0
             if proc.returncode != 0:
                 results.append({"source": source, "samples_requested": n,
                                 "error": proc.stderr.strip().splitlines()[-1:]})  # fmt: skip
