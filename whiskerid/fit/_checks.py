@@ -138,7 +138,7 @@ def lag_below(r: np.ndarray, limit: float):
     # Zero-padded to at least 2n (no wrap-around: the linear autocorrelation), to a length
     # of small prime factors: 2n itself has a large one for most n (158 988 samples:
     # 2n = 2³·3·13 249), where the transform falls back to a several times slower algorithm
-    # (0.93 of a 1.4 s calibration of 159 k samples).
+    # (0.93 s of a 1.4 s calibration of 159 k samples).
     m = fast_length(2 * n)
     f = np.fft.rfft(rc, m, axis=1)
     acf = np.fft.irfft(f * np.conj(f), m, axis=1)[:, :n]
