@@ -32,7 +32,10 @@ def add_posterior(sub, command_error) -> None:
             "with them sampled. Priors from the record's [prior] table (defaults: zeta uniform "
             "on (0, 0.95), f1_hz log-uniform over a decade either side of the fit, sigma_rel "
             "log-uniform on [1e-6, 10]). Writes DIR/posterior.toml (the record with a "
-            "[posterior] table), DIR/chain.h5, DIR/corner.png and DIR/trace.png. A run "
+            "[posterior] table), DIR/chain.h5, DIR/corner.png, DIR/trace.png and "
+            "DIR/predictive.png (the data against the 5-95% band of simulated recordings). "
+            "The calibration's warnings are repeated, and a posterior 68% half-width "
+            "narrower than calibrate's 1-sigma by more than 1.5x is a warning. A run "
             "shorter than 50 autocorrelation times is reported as not converged; --resume "
             "continues it. A record calibrated with --model nonlinear is sampled in the "
             "nonlinear model: f0 and zeta0 (reported as f1_hz and zeta), the nonlinear "
@@ -76,7 +79,27 @@ def add_posterior(sub, command_error) -> None:
         "--resume an existing output is refused; an output that is one of the inputs is "
         "refused even with --force",
     )
-    p.add_argument("--no-plots", action="store_true", help="skip the corner and trace PNGs")
+    p.add_argument(
+        "--chains",
+        type=int,
+        default=1,
+        help="independent ensembles of --walkers each (seeds --seed, --seed + 1, ...); with 2 "
+        "or more, ArviZ gives R-hat and bulk/tail ESS of each quantity across them (needs "
+        "whiskerid[arviz])",
+    )
+    p.add_argument(
+        "--netcdf",
+        type=Path,
+        metavar="FILE",
+        help="also write the run as ArviZ InferenceData (NetCDF: posterior, sample_stats, "
+        "observed_data, posterior_predictive; needs whiskerid[arviz]); an existing FILE is "
+        "refused unless --force (or --resume)",
+    )
+    p.add_argument(
+        "--no-plots",
+        action="store_true",
+        help="skip the corner, trace and posterior-predictive PNGs",
+    )
     p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     # Data options, as in `whiskerid calibrate` (read by its load_observations); those not
     # given are taken from the fit record's [fit.options] table.
@@ -88,7 +111,7 @@ def add_posterior(sub, command_error) -> None:
 
 
 #: What ``posterior`` writes into its --out folder.
-OUTPUTS = ("posterior.toml", "chain.h5", "corner.png", "trace.png")
+OUTPUTS = ("posterior.toml", "chain.h5", "corner.png", "trace.png", "predictive.png")
 
 #: The nonlinear model's coefficients, printed when a nonlinear record is sampled.
 NONLINEAR_REPORTED = ("gamma_per_m2", "quadratic_per_m", "coulomb_m_s2")
@@ -110,6 +133,16 @@ def _cmd_posterior(args, command_error, parser) -> dict:
         raise command_error(f"--nu {args.nu!r} must be a positive number")
     if args.resume and args.force:
         raise command_error("--resume continues the chain and --force replaces it: give one")
+    if args.chains < 1:
+        raise command_error(f"--chains {args.chains} must be >= 1")
+    if args.chains > 1 or args.netcdf is not None:
+        from ..posterior import import_arviz
+
+        try:
+            import_arviz()
+        except ImportError as err:
+            flag = "--netcdf" if args.netcdf is not None else "--chains"
+            raise command_error(f"{flag} needs ArviZ: {one_line(err)}") from None
     chain = args.out / "chain.h5"
     _check_out(args, command_error, chain)
     check_data_options(args)
@@ -149,6 +182,7 @@ def _cmd_posterior(args, command_error, parser) -> dict:
                 likelihood=args.likelihood,
                 nu=args.nu,
                 stop=policy.stop_requested,
+                chains=args.chains,
             )
     except OSError as err:
         _drop_empty_chain(chain, args.resume)
@@ -166,14 +200,36 @@ def _cmd_posterior(args, command_error, parser) -> dict:
             q = post.params[name]
             tau, ess = (f"{q[k]:.3g}" if math.isfinite(q[k]) else "unknown (too few steps)"
                         for k in ("tau", "ess"))  # fmt: skip
-            print(f"{name} = {interval_text(q)}, tau {tau}, ESS {ess}", file=sys.stderr)
+            arviz = ""
+            if "rhat" in q:
+                arviz = (f", R-hat {q['rhat']:.4f}, ESS bulk {q['ess_bulk']:.0f} "
+                         f"tail {q['ess_tail']:.0f}")  # fmt: skip
+            print(f"{name} = {interval_text(q)}, tau {tau}, ESS {ess}{arviz}", file=sys.stderr)
+            if name in post.calibration.get("width_ratio", {}):
+                ratio = post.calibration["width_ratio"][name]
+                print(f"    68% half-width / calibrate's 1-sigma = {ratio:.3g}", file=sys.stderr)
     print(f"acceptance {d['acceptance']:.3f}; {d['message']}", file=sys.stderr)
+    if args.chains > 1:
+        print(f"{args.chains} chains: largest R-hat {d['max_rhat']:.4f}", file=sys.stderr)
+    for warning in post.calibration.get("warnings", []):
+        print(f"warning: {warning}", file=sys.stderr)
     out = {**post.to_json(), "out": str(out_toml), "chain": str(chain), "options": used}
+    if args.netcdf is not None:
+        from ..io import atomic_path
+
+        try:
+            with atomic_path(args.netcdf) as tmp:
+                post.to_arviz().to_netcdf(str(tmp))
+        except OSError as err:
+            msg = f"could not write --netcdf {args.netcdf}: {one_line(err)}"
+            raise command_error(msg) from None
+        out["netcdf"] = str(args.netcdf)
     if not args.no_plots:
-        from ..plot import plot_corner, plot_trace
+        from ..plot import plot_corner, plot_predictive, plot_trace
 
         out["corner"] = str(plot_corner(args.out / "corner.png", post))
         out["trace"] = str(plot_trace(args.out / "trace.png", post))
+        out["predictive"] = str(plot_predictive(args.out / "predictive.png", post))
     print(f"wrote {args.out}", file=sys.stderr)
     return out
 
@@ -187,6 +243,8 @@ def _check_out(args, command_error, chain: Path) -> None:
         raise command_error(f"--resume: no chain at {chain}; leave --resume out to start one")
     inputs = {"REC": args.recordings, "--fit": args.fit, "--static": args.static}
     names = [n for n in OUTPUTS if not (args.resume and n == "chain.h5")]
+    if args.netcdf is not None:
+        check_outputs({"--netcdf": args.netcdf}, inputs, force=args.force or args.resume)
     # Per walker and step: the parameters (a few shared, a few per recording; the nonlinear
     # model samples the linear coefficients too), the
     # log-probability and emcee's bookkeeping, as float64; twice over for HDF5's chunks.
@@ -236,6 +294,8 @@ def _settings(args, used: dict) -> dict:
             "pin": args.pin,
             "modes": args.modes,
             "walkers": args.walkers,
+            # only where given: a chain started before --chains existed still resumes
+            **({"chains": args.chains} if args.chains > 1 else {}),
         },
     }
 

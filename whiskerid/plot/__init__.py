@@ -14,5 +14,6 @@ from ._plot import plot_recording_labels as plot_recording_labels
 from ._plot import plot_signal_and_spectrum as plot_signal_and_spectrum
 from ._plot import real_peaks as real_peaks
 from ._posterior import plot_corner as plot_corner
+from ._posterior import plot_predictive as plot_predictive
 from ._posterior import plot_trace as plot_trace
 from ._sidebands import plot_sidebands as plot_sidebands

@@ -195,3 +195,43 @@ def _trace_title(d: dict) -> str:
             f"{d['steps_needed'] - d['steps']} more"
         )
     return f"{head}\n{verdict}"
+
+
+#: Recordings drawn in the posterior-predictive figure at most (one panel each).
+_MAX_PREDICTIVE = 4
+
+
+def plot_predictive(path: str | Path, post, *, window_s: float | None = None) -> Path:
+    """Posterior-predictive check: each recording against the 5–95 % band of recordings
+    simulated at posterior draws (noise included), and the band's median; PNG.
+
+    Args:
+        path: The PNG to write.
+        post: A :class:`whiskerid.posterior.Posterior` with ``predictive`` draws.
+        window_s: Draw only the first ``window_s`` seconds of each recording (all of it by
+            default); a decay's oscillation is then visible cycle by cycle.
+    """
+    pred = post.predictive
+    if not pred:
+        raise ValueError("this posterior holds no predictive draws (summarize(n_predictive=0))")
+    plt = _pyplot()
+    n = min(len(pred["t"]), _MAX_PREDICTIVE)
+    fig, axes = plt.subplots(n, 1, figsize=(9, 2.4 * n + 0.8), squeeze=False)
+    for j, ax in enumerate(axes[:, 0]):
+        t, y = np.asarray(pred["t"][j]), np.asarray(pred["observed"][j])
+        draws = np.asarray(pred["draws"][j])
+        keep = slice(None) if window_s is None else t <= t[0] + window_s
+        lo, mid, hi = np.percentile(draws[:, keep], [5, 50, 95], axis=0)
+        inside = float(np.mean((y[keep] >= lo) & (y[keep] <= hi)))
+        ax.fill_between(t[keep], lo, hi, color="C0", alpha=0.3, lw=0,
+                        label=f"5–95 % of {draws.shape[0]} simulated recordings")  # fmt: skip
+        ax.plot(t[keep], mid, color="C0", lw=0.8, label="their median")
+        ax.plot(t[keep], y[keep], ".", color="k", ms=2, label="data")
+        ax.set_ylabel(f"recording {j + 1}", fontsize=8)
+        ax.set_title(f"{100 * inside:.0f} % of the samples inside the 90 % band", fontsize=8)
+        ax.tick_params(labelsize=7)
+    axes[0, 0].legend(loc="upper right", fontsize=7)
+    axes[-1, 0].set_xlabel("time (s)")
+    fig.suptitle("posterior-predictive check: data against simulated recordings", fontsize=9)
+    fig.tight_layout()
+    return _save(fig, path)

@@ -42,17 +42,24 @@ size ``walkers (steps − burn)/τ``; a run shorter than ``50 max τ`` is report
 ``converged = False`` with the number of steps needed.
 
 Modules, along a run: ``_prior`` (the ``[prior]`` table), ``_grid`` (free decays on a time
-grid), ``_likelihood`` (the log-posterior and the compiled batch function), ``_setup``
+grid), ``_likelihood`` (the log-posterior and the compiled batch function), ``_problem``
+(:class:`Problem`, shared by the linear and nonlinear set-ups), ``_nonlinear`` (a nonlinear
+calibration's posterior), ``_setup``
 (:func:`setup_posterior`: the calibration's Laplace approximation), ``_sample`` (emcee),
-``_summary`` (diagnostics and the reported quantities).
+``_summary`` (diagnostics and the reported quantities), ``_predictive`` (simulated recordings at
+posterior draws), ``_arviz`` (``InferenceData`` and R-hat/ESS across independent ensembles, with
+the optional ArviZ), ``_agreement`` (the calibration's warnings repeated, and the posterior's
+widths against its 1σ).
 """
 
 from .. import _jax_setup as _jax_setup
+from ._agreement import calibration_agreement as calibration_agreement
+from ._arviz import import_arviz as import_arviz
 from ._prior import PosteriorError as PosteriorError
 from ._prior import parse_prior as parse_prior
+from ._problem import Problem as Problem
 from ._sample import run_sampler as run_sampler
 from ._sample import sample_posterior as sample_posterior
-from ._setup import Problem as Problem
 from ._setup import setup_posterior as setup_posterior
 from ._summary import Posterior as Posterior
 from ._summary import derived_quantities as derived_quantities

@@ -31,7 +31,7 @@ import numpy as np
 from ..fit import calibrate
 from ._likelihood import _log_prior, _pack, _unpack
 from ._prior import PosteriorError, prior_arrays, prior_table
-from ._setup import Problem, _names
+from ._problem import Problem, _names
 
 #: The record's ``[fit.nonlinear]`` coefficient of each term.
 _COEFFICIENTS = {"cubic": "gamma_per_m2", "quadratic": "quadratic_per_m",

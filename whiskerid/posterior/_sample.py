@@ -9,8 +9,10 @@ import numpy as np
 from .._choices import MOVES
 from ..fit import Observation
 from ..model import WhiskerRecord
+from ._arviz import import_arviz
 from ._prior import PosteriorError
-from ._setup import Problem, setup_posterior
+from ._problem import Problem
+from ._setup import setup_posterior
 from ._summary import Posterior, summarize
 
 
@@ -77,6 +79,7 @@ def run_sampler(
     progress: bool = False,
     move: str = "de",
     stop=None,
+    name: str = "whiskerid",
 ):
     """Run emcee (vectorised) and return the sampler.
 
@@ -92,6 +95,7 @@ def run_sampler(
         stop: Called after every step; when it returns True the run stops there with
             :class:`KeyboardInterrupt` (raised between steps, never inside the
             log-probability, so the backend holds every finished step and resumes).
+        name: The chain's group in the HDF5 file (one per independent ensemble).
     """
     import emcee
 
@@ -107,7 +111,7 @@ def run_sampler(
             import h5py  # noqa: F401
         except ImportError:
             raise PosteriorError("the HDF5 backend needs h5py (pip install h5py)") from None
-        be = _checked_backend(emcee)(str(backend), name="whiskerid")
+        be = _checked_backend(emcee)(str(backend), name=name)
         if resume:
             if not Path(backend).exists() or be.iteration == 0:
                 raise PosteriorError(f"{backend}: nothing to resume")
@@ -196,6 +200,7 @@ def sample_posterior(
     progress: bool = False,
     move: str = "de",
     stop=None,
+    chains: int = 1,
     **setup,
 ) -> Posterior:
     """Posterior of ζ, f_1, κ (EI or C) and the noise, jointly over recordings of one whisker.
@@ -211,6 +216,9 @@ def sample_posterior(
         progress: Show emcee's progress bar.
         move: emcee's proposal, one of :data:`MOVES` (:func:`emcee_moves`).
         stop: Polled between steps; True stops the run (:func:`run_sampler`).
+        chains: Independent ensembles of ``walkers`` each, seeded ``seed``, ``seed + 1``, …
+            (in ``backend`` as groups ``whiskerid``, ``whiskerid_2``, …): their walkers are
+            pooled and ArviZ (``whiskerid[arviz]``) gives R-hat and bulk/tail ESS across them.
         **setup: Passed to :func:`setup_posterior` (``likelihood``, ``nu``, ``prior``,
             ``n_modes``, ``pin``, ``static``, ``marginalize``, ...).
 
@@ -218,16 +226,27 @@ def sample_posterior(
         A :class:`Posterior` (``diagnostics["converged"]`` says whether the run was long
         enough: at least 50 autocorrelation times).
     """
+    if chains < 1:
+        raise PosteriorError("chains must be >= 1")
+    if chains > 1:
+        try:
+            import_arviz()  # refused before minutes of sampling, not after
+        except ImportError as err:
+            raise PosteriorError(f"R-hat across chains needs ArviZ: {err}") from None
     prob = setup_posterior(record, observations, **setup)
-    sampler = run_sampler(
-        prob,
-        walkers=walkers,
-        steps=steps,
-        seed=seed,
-        backend=backend,
-        resume=resume,
-        progress=progress,
-        move=move,
-        stop=stop,
-    )
-    return summarize(prob, sampler, seed=seed)
+    samplers = [
+        run_sampler(
+            prob,
+            walkers=walkers,
+            steps=steps,
+            seed=seed + k,
+            backend=backend,
+            resume=resume,
+            progress=progress,
+            move=move,
+            stop=stop,
+            name="whiskerid" if k == 0 else f"whiskerid_{k + 1}",
+        )
+        for k in range(chains)
+    ]
+    return summarize(prob, samplers if chains > 1 else samplers[0], seed=seed)

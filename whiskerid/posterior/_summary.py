@@ -14,8 +14,15 @@ import numpy as np
 
 from ..fit import reported_names, sha256_of
 from ..model import WhiskerRecord
+from ._agreement import calibration_agreement
+from ._arviz import by_chain, inference_data
+from ._arviz import diagnostics as arviz_diagnostics
 from ._likelihood import _unravel
-from ._setup import Problem
+from ._predictive import observed, predictive_draws
+from ._problem import Problem
+
+#: Simulated recordings kept for the posterior-predictive check (all chains together).
+N_PREDICTIVE = 100
 
 
 # --------------------------------------------------------------------------- results
@@ -24,17 +31,30 @@ class Posterior:
     """Outcome of :func:`sample_posterior`.
 
     Attributes:
-        params: Reported quantity → ``median, q16, q84, q2.5, q97.5, mean, std, tau, ess``.
+        params: Reported quantity → ``median, q16, q84, q2.5, q97.5, mean, std, tau, ess``
+            (and ``rhat``, ``ess_bulk``, ``ess_tail`` from ArviZ with several chains).
         diagnostics: ``converged``, ``steps``, ``steps_needed``, ``walkers``, ``burn``,
             ``thin``, ``acceptance`` (mean), ``acceptance_min``, ``tau`` per sampled
             coordinate, ``max_tau``, ``log_prob_evals``, ``message``.
         correlations: ``{"names", "matrix"}`` of the reported quantities.
         samples: Burnt-in, thinned samples of the reported quantities ``(n, p)``.
         names: Their names.
-        chain: The full chain in the sampled space ``(steps, walkers, ndim)``.
+        chain: The full chain in the sampled space ``(steps, walkers, ndim)``; with several
+            independent ensembles (chains) their walkers side by side, chain after chain.
         chain_names: Names of the sampled coordinates.
         record: The record with a ``[posterior]`` table.
         provenance: Seed, sampler, likelihood, priors, data files with SHA-256, version.
+        derived_chain: The reported quantities along the full chain ``(steps, walkers, p)``.
+        log_prob: The log-posterior along the chain ``(steps, walkers)``.
+        acceptance_fraction: Each walker's acceptance fraction ``(walkers,)``.
+        n_chains: Independent ensembles run (their walkers are ``chain``'s, in order).
+        calibration: The calibration the run started from, beside it
+            (:func:`~whiskerid.posterior._agreement.calibration_agreement`): its ``status``,
+            its warnings repeated, the ``width_ratio`` of each quantity (posterior 68 %
+            half-width / calibrate's 1σ) and ``warnings`` (those, and any width narrower by
+            more than 1.5×).
+        predictive: ``{"t", "observed", "draws"}``: per recording its timestamps, its data and
+            simulated recordings ``(draws, samples)`` at posterior draws (observed units).
     """
 
     params: dict[str, dict]
@@ -47,6 +67,18 @@ class Posterior:
     record: WhiskerRecord | None = None
     provenance: dict[str, Any] = field(default_factory=dict)
     derived_chain: np.ndarray | None = field(default=None, repr=False)
+    log_prob: np.ndarray | None = field(default=None, repr=False)
+    acceptance_fraction: np.ndarray | None = field(default=None, repr=False)
+    n_chains: int = 1
+    predictive: dict | None = field(default=None, repr=False)
+    calibration: dict = field(default_factory=dict)
+
+    def to_arviz(self):
+        """The run as ArviZ ``InferenceData`` (needs ``whiskerid[arviz]``): groups
+        ``posterior`` (the reported quantities), ``sample_stats`` (``lp``,
+        ``acceptance_rate``), ``observed_data`` and ``posterior_predictive``; one ``chain`` per
+        independent ensemble (see :mod:`whiskerid.posterior._arviz`)."""
+        return inference_data(self)
 
     def to_json(self) -> dict:
         """The JSON summary (``whiskerid posterior --json``); a number that could not be
@@ -61,6 +93,17 @@ class Posterior:
                 "diagnostics": self.diagnostics,
                 "correlations": self.correlations,
                 "provenance": self.provenance,
+                "calibration": self.calibration,
+                "width_ratio": self.calibration.get("width_ratio", {}),
+                "warnings": self.calibration.get("warnings", []),
+                **(
+                    {
+                        k: {n: v[k] for n, v in self.params.items()}
+                        for k in ("rhat", "ess_bulk", "ess_tail")
+                    }
+                    if self.n_chains > 1
+                    else {}
+                ),
             }
         )
 
@@ -128,9 +171,23 @@ def _tau(x: np.ndarray) -> np.ndarray:
         log.setLevel(level)
 
 
-def summarize(prob: Problem, sampler, *, seed: int | None = None) -> Posterior:
-    """Diagnostics, burn-in and thinning from τ, and the summary of the reported quantities."""
-    chain = sampler.get_chain()
+def summarize(
+    prob: Problem, sampler, *, seed: int | None = None, n_predictive: int = N_PREDICTIVE
+) -> Posterior:
+    """Diagnostics, burn-in and thinning from τ, and the summary of the reported quantities.
+
+    Args:
+        prob: The problem sampled.
+        sampler: An emcee sampler, or a list of them (independent ensembles of the same
+            walkers and steps: their walkers are pooled, and ArviZ gives R-hat and bulk and
+            tail ESS of each reported quantity across them).
+        seed: For the provenance and the posterior-predictive draws.
+        n_predictive: Simulated recordings to keep (0: none).
+    """
+    samplers = list(sampler) if isinstance(sampler, list | tuple) else [sampler]
+    n_chains = len(samplers)
+    chain = np.concatenate([s.get_chain() for s in samplers], axis=1)
+    log_prob = np.concatenate([s.get_log_prob() for s in samplers], axis=1)
     steps, walkers, ndim = chain.shape
     tau = _tau(chain)
     max_tau = float(np.nanmax(tau)) if np.any(np.isfinite(tau)) else float("nan")
@@ -141,7 +198,7 @@ def summarize(prob: Problem, sampler, *, seed: int | None = None) -> Posterior:
     thin = max(1, int(0.5 * min_tau))
     needed = math.ceil(50 * max_tau) if finite_tau else None
     converged = bool(finite_tau and steps >= needed)
-    acc = np.asarray(sampler.acceptance_fraction)
+    acc = np.concatenate([np.asarray(s.acceptance_fraction) for s in samplers])
     derived_full, names = derived_quantities(prob, chain.reshape(-1, ndim))
     derived_full = derived_full.reshape(steps, walkers, -1)
     tau_d = _tau(derived_full)
@@ -163,6 +220,11 @@ def summarize(prob: Problem, sampler, *, seed: int | None = None) -> Posterior:
             "tau": t_i,
             "ess": float(ess),
         }
+    if n_chains > 1:
+        per_chain = by_chain(derived_full[burn::thin], n_chains)
+        found = arviz_diagnostics({n: per_chain[..., i] for i, n in enumerate(names)})
+        for name in names:
+            params[name].update(found[name])
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = np.corrcoef(kept.T) if kept.shape[0] > 2 else np.eye(len(names))
     if not finite_tau:
@@ -188,7 +250,11 @@ def summarize(prob: Problem, sampler, *, seed: int | None = None) -> Posterior:
         "tau": {n: float(t) for n, t in zip(prob.names, tau, strict=True)},
         "max_tau": max_tau,
         "log_prob_evals": int(steps * walkers),
+        "chains": int(n_chains),
     }
+    if n_chains > 1:
+        rhat = [params[n]["rhat"] for n in names]
+        diagnostics["max_rhat"] = float(np.nanmax(rhat)) if np.any(np.isfinite(rhat)) else None
     provenance = _provenance(prob, walkers, seed, getattr(sampler, "whiskerid_move", None))
     post = Posterior(
         params=params,
@@ -200,9 +266,31 @@ def summarize(prob: Problem, sampler, *, seed: int | None = None) -> Posterior:
         chain_names=list(prob.names),
         provenance=provenance,
         derived_chain=derived_full,
+        log_prob=log_prob,
+        acceptance_fraction=acc,
+        n_chains=n_chains,
+        predictive=_predictive(prob, chain[burn::thin], n_chains, n_predictive, seed),
+        calibration=calibration_agreement(prob.record, params),
     )
     post.record = _updated_record(prob.record, post)
     return post
+
+
+def _predictive(prob, kept, n_chains, n, seed) -> dict | None:
+    """``n`` simulated recordings at draws spread evenly over the chains (a whole multiple of
+    the chains, so that each chain has as many)."""
+    if n <= 0:
+        return None
+    per = math.ceil(n / n_chains)
+    rng = np.random.default_rng([0 if seed is None else int(seed), 49])
+    pooled = by_chain(kept, n_chains)  # (K, W·kept, ndim)
+    z = np.concatenate([c[rng.integers(0, c.shape[0], per)] for c in pooled])
+    data = observed(prob)
+    return {
+        "t": [t for t, _ in data],
+        "observed": [y for _, y in data],
+        "draws": predictive_draws(prob, z, rng),
+    }
 
 
 def _provenance(prob, walkers, seed, move):
@@ -250,6 +338,7 @@ def _updated_record(record: WhiskerRecord, post: Posterior) -> WhiskerRecord:
         "diagnostics": {k: v for k, v in d.items() if v is not None},
         "correlations": post.correlations,
         "provenance": post.provenance,
+        "calibration": post.calibration,
     }
     extra = dict(record.extra)
     extra["posterior"] = without_none(finite_or_none(table))
