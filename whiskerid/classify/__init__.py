@@ -7,11 +7,12 @@ whisker-aware filters in ``_features_whisker``), ``_mlp`` (the network and its t
 ``_split`` (splits and folds by recording), ``_train`` (a :class:`ClassifierModel` from
 windows), ``_model_file`` (the model, its compiled predict functions and its files),
 ``_whisker`` (the whisker's own transfer function, divided out of whisker-aware
-features), ``_evaluate`` (scores, cross-validation, the paper's protocol) and
-``_borealtc`` (a public IMU dataset). The window checks (:func:`window_health`) and the
-context fusion (:func:`fuse_context`) are NumPy only and live in :mod:`whiskerid.io`
-(``_health``, ``_health_modes``, ``_context``), so that the online stream runs them
-without JAX; they are re-exported here.
+features), ``_evaluate`` (scores, cross-validation, the paper's protocol),
+``_borealtc`` (a public IMU dataset) and ``_sklearn`` (:class:`TerrainClassifier`, a
+scikit-learn estimator; loaded on first use, as it needs scikit-learn). The window checks
+(:func:`window_health`) and the context fusion (:func:`fuse_context`) are NumPy only and
+live in :mod:`whiskerid.io` (``_health``, ``_health_modes``, ``_context``), so that the
+online stream runs them without JAX; they are re-exported here.
 """
 
 from .. import _jax_setup as _jax_setup
@@ -61,3 +62,13 @@ from ._whisker import ALIAS_SLOPE as ALIAS_SLOPE
 from ._whisker import SPAN_WHISKERS as SPAN_WHISKERS
 from ._whisker import WhiskerResponse as WhiskerResponse
 from ._whisker import deflection_per_acc as deflection_per_acc
+
+
+def __getattr__(name: str):
+    """:class:`TerrainClassifier` on first use: it needs scikit-learn, an optional dependency
+    (``pip install whiskerid[sklearn]``), which the rest of this package does without."""
+    if name == "TerrainClassifier":
+        from ._sklearn import TerrainClassifier
+
+        return TerrainClassifier
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
