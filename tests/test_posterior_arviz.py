@@ -77,6 +77,9 @@ def test_netcdf_with_chains_opens_in_arviz(tmp_path, capsys):
     assert res["diagnostics"]["chains"] == 3
     assert set(res["width_ratio"]) >= {"f1_hz", "zeta"}
     assert all(r > 0 for r in res["width_ratio"].values())
+    # a linear decay in white noise: the posterior is as wide as calibrate's white-noise 1σ
+    for name, r in res["calibration"]["width_ratio_white"].items():
+        assert 0.7 < r < 1.4, (name, r)
 
     # an existing NetCDF is refused without --force
     run[run.index("--out") + 1] = str(tmp_path / "post2")
@@ -106,3 +109,9 @@ def test_calibration_warnings_repeated_and_narrow_widths_flagged():
     assert len(narrow) == 1 and narrow[0].startswith("f1_hz")
     # a record without a calibration: nothing to repeat or compare
     assert calibration_agreement(wi.paper_record(), params)["warnings"] == []
+    # the layers of the 1-sigma, from the calibration the posterior ran
+    layers = {"f1_hz": {"std": 0.01, "std_white": 0.001, "std_without_model_error": 0.004}}
+    out = calibration_agreement(wi.paper_record(), params, layers)
+    assert out["width_ratio"]["f1_hz"] == pytest.approx(0.1)
+    assert out["width_ratio_white"]["f1_hz"] == pytest.approx(1.0)
+    assert out["width_ratio_sandwich"]["f1_hz"] == pytest.approx(0.25)

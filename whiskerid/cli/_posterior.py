@@ -206,8 +206,7 @@ def _cmd_posterior(args, command_error, parser) -> dict:
                          f"tail {q['ess_tail']:.0f}")  # fmt: skip
             print(f"{name} = {interval_text(q)}, tau {tau}, ESS {ess}{arviz}", file=sys.stderr)
             if name in post.calibration.get("width_ratio", {}):
-                ratio = post.calibration["width_ratio"][name]
-                print(f"    68% half-width / calibrate's 1-sigma = {ratio:.3g}", file=sys.stderr)
+                print(f"    {_ratio_text(post.calibration, name)}", file=sys.stderr)
     print(f"acceptance {d['acceptance']:.3f}; {d['message']}", file=sys.stderr)
     if args.chains > 1:
         print(f"{args.chains} chains: largest R-hat {d['max_rhat']:.4f}", file=sys.stderr)
@@ -232,6 +231,15 @@ def _cmd_posterior(args, command_error, parser) -> dict:
         out["predictive"] = str(plot_predictive(args.out / "predictive.png", post))
     print(f"wrote {args.out}", file=sys.stderr)
     return out
+
+
+def _ratio_text(agreement: dict, name: str) -> str:
+    """The posterior's 68% half-width against calibrate's 1-sigma, and against its layers."""
+    text = f"68% half-width / calibrate's 1-sigma = {agreement['width_ratio'][name]:.3g}"
+    layers = [(agreement.get("width_ratio_sandwich", {}).get(name), "without model error"),
+              (agreement.get("width_ratio_white", {}).get(name), "white-noise")]  # fmt: skip
+    given = [f"{what} {r:.3g}" for r, what in layers if r is not None]
+    return text + (f" (its 1-sigma {', '.join(given)})" if given else "")
 
 
 def _check_out(args, command_error, chain: Path) -> None:

@@ -216,7 +216,7 @@ def setup_nonlinear(record, obs, *, n_modes, pin, likelihood, nu, marginalize, u
     return NonlinearPosteriorProblem(
         model=model, args=args, z0=z0, cov=cov_z, names=names, priors=priors,
         observations=list(obs), record=record, pin=pin,
-        y_std=[float(np.std(o.y)) for o in obs], nu=float(nu),
+        y_std=[float(np.std(o.y)) for o in obs], nu=float(nu), calibration=cal.params,
         amplitudes_m=(float(amps[0]), float(amps[-1])),
     )  # fmt: skip
 

@@ -30,6 +30,9 @@ class Problem:
         record: The whisker's record.
         pin: What fixes EI or C (as in the calibration).
         y_std: Each recording's standard deviation (σ in observed units = σ_rel · y_std).
+        calibration: The calibration's reported quantities (value, ``std`` and, where
+            computed, ``std_white`` and ``std_without_model_error``), from the fit the
+            posterior starts at.
     """
 
     model: _Model
@@ -43,6 +46,7 @@ class Problem:
     pin: str
     y_std: list[float]
     nu: float = 4.0
+    calibration: dict | None = None
     # (args, compiled function, packed args) of the last call: looked up and packed once,
     # not on every emcee step (hashing the model alone costs a microsecond or two).
     _compiled: Any = field(default=None, init=False, repr=False, compare=False)

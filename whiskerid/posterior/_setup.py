@@ -87,7 +87,7 @@ def setup_posterior(
                                nu=nu, marginalize=marginalize, user_prior=user,
                                f1_start_hz=f1_start_hz, nl_terms=nl_terms)  # fmt: skip
 
-    problem, theta_hat, cov_full, sig = _laplace(
+    problem, theta_hat, cov_full, sig, cal_params = _laplace(
         record, obs, static, n_modes, zeta_per_mode, pin, f1_start_hz, added_mass
     )
     # Sampled space: the calibration's flat vector (without c when marginalised) + log σ_j.
@@ -150,13 +150,15 @@ def setup_posterior(
         pin=pin,
         y_std=[float(np.std(o.y)) for o in obs],
         nu=float(nu),
+        calibration=cal_params,
     )
 
 
 def _laplace(record, obs, static, n_modes, zeta_per_mode, pin, f1_start_hz, added_mass=None):
     """The calibration fit: its problem (recordings weighted by their residual scale), the
-    optimum, its covariance (a small diagonal one where that is not finite) and each
-    recording's residual scale σ_j in normalised units."""
+    optimum, its covariance (a small diagonal one where that is not finite), each
+    recording's residual scale σ_j in normalised units and the calibration's reported
+    quantities."""
     cal = calibrate(
         record,
         obs,
@@ -173,4 +175,4 @@ def _laplace(record, obs, static, n_modes, zeta_per_mode, pin, f1_start_hz, adde
         scale = 1e-4 * np.maximum(np.abs(flat), 1e-2)
         cov = np.diag(scale**2)
     sig = np.array([1.0 / float(r.weight) for r in problem.recordings])
-    return problem, cal.optimum, cov, sig
+    return problem, cal.optimum, cov, sig, cal.params

@@ -270,7 +270,7 @@ def summarize(
         acceptance_fraction=acc,
         n_chains=n_chains,
         predictive=_predictive(prob, chain[burn::thin], n_chains, n_predictive, seed),
-        calibration=calibration_agreement(prob.record, params),
+        calibration=calibration_agreement(prob.record, params, prob.calibration),
     )
     post.record = _updated_record(prob.record, post)
     return post
