@@ -208,30 +208,56 @@ def plot_predictive(path: str | Path, post, *, window_s: float | None = None) ->
     Args:
         path: The PNG to write.
         post: A :class:`whiskerid.posterior.Posterior` with ``predictive`` draws.
-        window_s: Draw only the first ``window_s`` seconds of each recording (all of it by
-            default); a decay's oscillation is then visible cycle by cycle.
+        window_s: Draw the first ``window_s`` seconds of each recording. By default the span
+            where the simulated signal stands out of its noise (and half as long again), at
+            least 20 samples: a free decay is over long before most recordings end, and drawn
+            whole its cycles would be a smear.
     """
     pred = post.predictive
     if not pred:
         raise ValueError("this posterior holds no predictive draws (summarize(n_predictive=0))")
     plt = _pyplot()
     n = min(len(pred["t"]), _MAX_PREDICTIVE)
-    fig, axes = plt.subplots(n, 1, figsize=(9, 2.4 * n + 0.8), squeeze=False)
-    for j, ax in enumerate(axes[:, 0]):
+    fig, axes = plt.subplots(2 * n, 1, figsize=(9, 4.2 * n + 0.8), squeeze=False)
+    for j in range(n):
+        ax, res = axes[2 * j, 0], axes[2 * j + 1, 0]
         t, y = np.asarray(pred["t"][j]), np.asarray(pred["observed"][j])
         draws = np.asarray(pred["draws"][j])
-        keep = slice(None) if window_s is None else t <= t[0] + window_s
-        lo, mid, hi = np.percentile(draws[:, keep], [5, 50, 95], axis=0)
-        inside = float(np.mean((y[keep] >= lo) & (y[keep] <= hi)))
-        ax.fill_between(t[keep], lo, hi, color="C0", alpha=0.3, lw=0,
+        lo, mid, hi = np.percentile(draws, [5, 50, 95], axis=0)
+        inside = (y >= lo) & (y <= hi)
+        end = _signal_end(t, lo, mid, hi) if window_s is None else t[0] + window_s
+        keep = t <= end
+        tk = t[keep]
+        ax.fill_between(tk, lo[keep], hi[keep], color="C0", alpha=0.3, lw=0,
                         label=f"5–95 % of {draws.shape[0]} simulated recordings")  # fmt: skip
-        ax.plot(t[keep], mid, color="C0", lw=0.8, label="their median")
-        ax.plot(t[keep], y[keep], ".", color="k", ms=2, label="data")
+        ax.plot(tk, mid[keep], color="C0", lw=0.8, label="their median")
+        ax.plot(tk, y[keep], ".", color="k", ms=3, label="data")
         ax.set_ylabel(f"recording {j + 1}", fontsize=8)
-        ax.set_title(f"{100 * inside:.0f} % of the samples inside the 90 % band", fontsize=8)
-        ax.tick_params(labelsize=7)
+        ax.set_title(
+            f"inside the 90 % band: {100 * np.mean(inside[keep]):.0f} % of the samples drawn, "
+            f"{100 * np.mean(inside):.0f} % of all {t.size}",
+            fontsize=8,
+        )
+        # the band is a few noise σ wide, invisible beside the signal: again, less the median
+        res.fill_between(tk, (lo - mid)[keep], (hi - mid)[keep], color="C0", alpha=0.3, lw=0)
+        res.axhline(0.0, color="C0", lw=0.8)
+        res.plot(tk, (y - mid)[keep], ".", color="k", ms=3)
+        res.set_ylabel("less the median", fontsize=8)
+        for a in (ax, res):
+            a.tick_params(labelsize=7)
     axes[0, 0].legend(loc="upper right", fontsize=7)
     axes[-1, 0].set_xlabel("time (s)")
     fig.suptitle("posterior-predictive check: data against simulated recordings", fontsize=9)
     fig.tight_layout()
     return _save(fig, path)
+
+
+def _signal_end(t, lo, mid, hi) -> float:
+    """Where the simulated median last stands out of the band's noise (twice its half-width
+    from its level at the end), half as long again; at least 20 samples."""
+    level = np.median(mid[-max(len(mid) // 10, 1) :])
+    noise = np.median(0.5 * (hi - lo))
+    above = np.flatnonzero(np.abs(mid - level) > 2 * noise)
+    last = int(above[-1]) if above.size else len(t) - 1
+    end = t[0] + 1.5 * (t[last] - t[0])
+    return float(max(end, t[min(19, len(t) - 1)]))
