@@ -39,8 +39,8 @@ def calibration_agreement(
         ``width_ratio`` (quantity → posterior 68 % half-width / calibrate's 1σ, for the
         quantities both report with a finite, positive width), ``width_ratio_white`` and
         ``width_ratio_sandwich`` (the same against the layers of the 1σ, where known) and
-        ``warnings`` (those repeated, then one per quantity narrower by more than
-        :data:`NARROW`).
+        ``warnings`` (those repeated, then one naming the quantities narrower by more than
+        :data:`NARROW`, if any).
     """
     fit = record.extra.get("fit") or {}
     status = fit.get("status")
@@ -50,13 +50,15 @@ def calibration_agreement(
     stated = fit.get("params") or calibration or {}
     ratios = _ratios(params, stated, "std")
     layers = calibration or {}
-    narrow = [
-        f"{name}: the posterior's 68 % half-width is {r:.3g} x calibrate's 1-sigma (narrower "
-        f"by more than {NARROW:g}x): its likelihood takes the residuals as white noise, "
-        "calibrate's 1-sigma (HAC, model error) does not; trust the wider one"
-        for name, r in ratios.items()
-        if r < 1.0 / NARROW
-    ]
+    narrow = [f"{name} {r:.3g}x" for name, r in ratios.items() if r < 1.0 / NARROW]
+    if narrow:
+        narrow = [
+            f"the posterior's 68 % half-widths are narrower than calibrate's 1-sigma by more "
+            f"than {NARROW:g}x ({', '.join(narrow)}): its likelihood is white noise of one "
+            "sigma per recording under the calibration's model, calibrate's 1-sigma also "
+            "carries the residuals' changing spread or correlation and any model error; trust "
+            "the wider one"
+        ]
     return {
         "status": status,
         "calibration_warnings": repeated,
