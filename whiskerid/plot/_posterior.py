@@ -207,15 +207,14 @@ def plot_predictive(path: str | Path, post, *, window_s: float | None = None) ->
 
     Args:
         path: The PNG to write.
-        post: A :class:`whiskerid.posterior.Posterior` with ``predictive`` draws.
+        post: A :class:`whiskerid.posterior.Posterior` (its
+            :meth:`~whiskerid.posterior.Posterior.predictive_draws`).
         window_s: Draw the first ``window_s`` seconds of each recording. By default the span
             where the simulated signal stands out of its noise (and half as long again), at
             least 20 samples: a free decay is over long before most recordings end, and drawn
             whole its cycles would be a smear.
     """
-    pred = post.predictive
-    if not pred:
-        raise ValueError("this posterior holds no predictive draws (summarize(n_predictive=0))")
+    pred = post.predictive_draws()
     plt = _pyplot()
     n = min(len(pred["t"]), _MAX_PREDICTIVE)
     fig, axes = plt.subplots(2 * n, 1, figsize=(9, 4.2 * n + 0.8), squeeze=False)

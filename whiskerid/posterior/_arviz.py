@@ -76,7 +76,7 @@ def inference_data(post):
     lp = post.log_prob[post.diagnostics["burn"] :: post.diagnostics["thin"]]
     acc = np.broadcast_to(post.acceptance_fraction, lp.shape)
     sample_stats = {"lp": by_chain(lp, k), "acceptance_rate": by_chain(acc, k)}
-    pred = post.predictive
+    pred = post.predictive_draws()
     observed, predictive, coords, dims = {}, {}, {}, {}
     for j, (t, y) in enumerate(zip(pred["t"], pred["observed"], strict=True)):
         name, time = f"y_{j + 1}", f"time_{j + 1}"

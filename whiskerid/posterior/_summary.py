@@ -54,7 +54,9 @@ class Posterior:
             half-width / calibrate's 1σ) and ``warnings`` (those, and any width narrower by
             more than 1.5×).
         predictive: ``{"t", "observed", "draws"}``: per recording its timestamps, its data and
-            simulated recordings ``(draws, samples)`` at posterior draws (observed units).
+            simulated recordings ``(draws, samples)`` at posterior draws (observed units);
+            None until :meth:`predictive_draws` (or ``summarize(n_predictive=...)``) makes them.
+        problem: The problem sampled (for :meth:`predictive_draws`).
     """
 
     params: dict[str, dict]
@@ -72,6 +74,18 @@ class Posterior:
     n_chains: int = 1
     predictive: dict | None = field(default=None, repr=False)
     calibration: dict = field(default_factory=dict)
+    problem: Problem | None = field(default=None, repr=False)
+
+    def predictive_draws(self, n: int = N_PREDICTIVE) -> dict:
+        """Simulated recordings at ``n`` posterior draws (:attr:`predictive`), made on first
+        call (they compile the design for a batch of draws: seconds, so not on every run)."""
+        if self.predictive is None:
+            if self.problem is None:
+                raise ValueError("this posterior keeps no problem to simulate recordings from")
+            kept = self.chain[self.diagnostics["burn"] :: self.diagnostics["thin"]]
+            seed = self.provenance.get("seed", 0)
+            self.predictive = _predictive(self.problem, kept, self.n_chains, n, seed)
+        return self.predictive
 
     def to_arviz(self):
         """The run as ArviZ ``InferenceData`` (needs ``whiskerid[arviz]``): groups
@@ -172,7 +186,7 @@ def _tau(x: np.ndarray) -> np.ndarray:
 
 
 def summarize(
-    prob: Problem, sampler, *, seed: int | None = None, n_predictive: int = N_PREDICTIVE
+    prob: Problem, sampler, *, seed: int | None = None, n_predictive: int = 0
 ) -> Posterior:
     """Diagnostics, burn-in and thinning from τ, and the summary of the reported quantities.
 
@@ -182,7 +196,8 @@ def summarize(
             walkers and steps: their walkers are pooled, and ArviZ gives R-hat and bulk and
             tail ESS of each reported quantity across them).
         seed: For the provenance and the posterior-predictive draws.
-        n_predictive: Simulated recordings to keep (0: none).
+        n_predictive: Simulated recordings to make now (0: on demand, by
+            :meth:`Posterior.predictive_draws`).
     """
     samplers = list(sampler) if isinstance(sampler, list | tuple) else [sampler]
     n_chains = len(samplers)
@@ -270,6 +285,7 @@ def summarize(
         acceptance_fraction=acc,
         n_chains=n_chains,
         predictive=_predictive(prob, chain[burn::thin], n_chains, n_predictive, seed),
+        problem=prob,
         calibration=calibration_agreement(prob.record, params, prob.calibration),
     )
     post.record = _updated_record(prob.record, post)
@@ -282,7 +298,7 @@ def _predictive(prob, kept, n_chains, n, seed) -> dict | None:
     if n <= 0:
         return None
     per = math.ceil(n / n_chains)
-    rng = np.random.default_rng([0 if seed is None else int(seed), 49])
+    rng = np.random.default_rng([max(0 if seed is None else int(seed), 0), 49])
     pooled = by_chain(kept, n_chains)  # (K, W·kept, ndim)
     z = np.concatenate([c[rng.integers(0, c.shape[0], per)] for c in pooled])
     data = observed(prob)
