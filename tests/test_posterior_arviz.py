@@ -81,6 +81,16 @@ def test_netcdf_with_chains_opens_in_arviz(tmp_path, capsys):
     for name, r in res["calibration"]["width_ratio_white"].items():
         assert 0.7 < r < 1.4, (name, r)
 
+    # --resume continues every chain (and replaces the NetCDF); other --chains are refused
+    more = [*run[:6], "--steps", "20", *run[8:], "--resume", "--no-plots"]
+    assert main(more) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["diagnostics"]["steps"] == 270 and res["diagnostics"]["chains"] == 3
+    assert az.from_netcdf(nc).posterior.sizes["chain"] == 3
+    more[more.index("--chains") + 1] = "2"
+    assert main(more) == 2
+    assert "chains: then 3, now 2" in capsys.readouterr().err
+
     # an existing NetCDF is refused without --force
     run[run.index("--out") + 1] = str(tmp_path / "post2")
     assert main(run) == 2

@@ -256,7 +256,7 @@ def _check_out(args, command_error, chain: Path) -> None:
     # Per walker and step: the parameters (a few shared, a few per recording; the nonlinear
     # model samples the linear coefficients too), the
     # log-probability and emcee's bookkeeping, as float64; twice over for HDF5's chunks.
-    per_step = args.walkers * (8 + 8 * len(args.recordings)) * 8 * 2
+    per_step = args.chains * args.walkers * (8 + 8 * len(args.recordings)) * 8 * 2
     for n in names:
         check_outputs(
             {"--out": args.out / n},
