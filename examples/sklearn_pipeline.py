@@ -13,7 +13,6 @@ Needs ``pip install "whiskerid[sklearn]"``. Example::
 
 import argparse
 import json
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -30,10 +29,10 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args()
     data = args.out / "dataset"
-    if data.exists():  # this script's own dataset from an earlier run: made afresh
-        shutil.rmtree(data)
+    # replace_synthetic: a rerun replaces this script's own recordings, and nothing else
     wi.synthesize_dataset(data, terrains=("flat", "brick", "sand"), speeds=(0.1, 0.2),
-                          runs=3, duration_s=8.0, seed=args.seed)  # fmt: skip
+                          runs=3, duration_s=8.0, seed=args.seed,
+                          replace_synthetic=True)  # fmt: skip
     ws = wi.load_dataset(data)
     X, y = ws.windows, np.asarray(ws.label_names)[ws.labels]
     groups = ws.recording  # one group per recording
