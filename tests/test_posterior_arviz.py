@@ -116,7 +116,7 @@ def test_calibration_warnings_repeated_and_narrow_widths_flagged():
     assert out["warnings"][0] == "calibration: status check"
     assert out["warnings"][1] == "calibration: residual-correlated: the residuals are not white"
     narrow = [w for w in out["warnings"] if "narrower" in w]
-    assert len(narrow) == 1 and "(f1_hz 0.1x)" in narrow[0]
+    assert len(narrow) == 1 and "(f1_hz 0.1x)" in narrow[0] and "--t-end" not in narrow[0]
     # a record without a calibration: nothing to repeat or compare
     assert calibration_agreement(wi.paper_record(), params)["warnings"] == []
     # the layers of the 1-sigma, from the calibration the posterior ran
@@ -125,3 +125,4 @@ def test_calibration_warnings_repeated_and_narrow_widths_flagged():
     assert out["width_ratio"]["f1_hz"] == pytest.approx(0.1)
     assert out["width_ratio_white"]["f1_hz"] == pytest.approx(1.0)
     assert out["width_ratio_sandwich"]["f1_hz"] == pytest.approx(0.25)
+    assert "--t-end" in out["warnings"][-1]  # narrower than the sandwich too: the hint

@@ -59,12 +59,21 @@ def calibration_agreement(
             "carries the residuals' changing spread or correlation and any model error; trust "
             "the wider one"
         ]
+    sandwich = _ratios(params, layers, "std_without_model_error")
+    spread = [name for name, r in sandwich.items() if r < 1.0 / NARROW]
+    if narrow and spread:
+        narrow[0] += (
+            f"; narrower than calibrate's 1-sigma without model error too ({', '.join(spread)}): "
+            "the residuals' spread changes along the recording, as when a free decay is "
+            "followed by the whisker at rest on one ADC code; sample the decay only "
+            "(--t-end on the command line)"
+        )
     return {
         "status": status,
         "calibration_warnings": repeated,
         "width_ratio": ratios,
         "width_ratio_white": _ratios(params, layers, "std_white"),
-        "width_ratio_sandwich": _ratios(params, layers, "std_without_model_error"),
+        "width_ratio_sandwich": sandwich,
         "warnings": repeated + narrow,
     }
 
