@@ -4,7 +4,7 @@ whole (values, dtype, shape), and the program computes what the function compute
 import jax.numpy as jnp
 import numpy as np
 
-from whiskerid.fit._aot import _pack, _packing, _unpack, cached_call
+from whiskerid.fit._numerics._aot import _pack, _packing, _unpack, cached_call
 
 
 def _leaves():

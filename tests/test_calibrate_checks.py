@@ -131,7 +131,7 @@ ALIASES = [
 
 @pytest.mark.parametrize(("f1", "expected", "rates", "alias"), ALIASES)
 def test_an_f1_is_aliased_when_the_data_cannot_choose_it(f1, expected, rates, alias):
-    from whiskerid.fit._checks import aliased
+    from whiskerid.fit._checks._checks import aliased
 
     got = aliased(f1, expected, rates)
     assert (got is None) if alias is None else got == pytest.approx(alias)
@@ -140,7 +140,7 @@ def test_an_f1_is_aliased_when_the_data_cannot_choose_it(f1, expected, rates, al
 # --------------------------------------------------------------------------- HAC, robustness
 def _hac_by_lags(blocks, bread):
     """The Newey–West sum written lag by lag (the O(n L p²) form it replaced)."""
-    from whiskerid.fit._checks import hac_lag
+    from whiskerid.fit._checks._checks import hac_lag
 
     meat = np.zeros_like(bread)
     for jac, r, correlated in blocks:
@@ -156,7 +156,7 @@ def _hac_by_lags(blocks, bread):
 
 @pytest.mark.parametrize("n", [17, 200, 1500])
 def test_hac_by_moving_sums_equals_the_sum_over_lags(n):
-    from whiskerid.fit._checks import bartlett_meat, hac_covariance
+    from whiskerid.fit._checks._checks import bartlett_meat, hac_covariance
 
     rng = np.random.default_rng(n)
     jac = rng.standard_normal((n, 4)) * [1e-3, 1.0, 10.0, 1e3]
@@ -223,7 +223,7 @@ def _decay(t, f=46.0, zeta=0.04):
 
 
 def test_a_line_the_data_carry_is_found_and_a_tiny_misfit_is_not():
-    from whiskerid.fit._checks import residual_peak
+    from whiskerid.fit._checks._checks import residual_peak
 
     t = np.arange(2000) / 200.0
     y = 1e-5 * _decay(t)

@@ -99,7 +99,7 @@ def test_window_fits_at_other_rates_compile_nothing_new():
 
 # ------------------------------------------------------------------ shape buckets, the cache
 def test_shape_buckets_are_at_most_a_quarter_longer_and_never_shorter():
-    from whiskerid.fit._core import bucket
+    from whiskerid.fit._linear._program import bucket
 
     sizes = [bucket(n) for n in range(1, 20_000)]
     assert all(b >= n for n, b in enumerate(sizes, start=1))
@@ -157,7 +157,7 @@ cal = wi.calibrate(wi.paper_record(), obs, model="nonlinear")
 print(cal.linear.params["f1_hz"]["value"], cal.params["f1_hz"]["value"])
 # the fit package's jitted functions (jax.jit or equinox.filter_jit), by name
 jitted = set()
-for info in pkgutil.iter_modules(whiskerid.fit.__path__, "whiskerid.fit."):
+for info in pkgutil.walk_packages(whiskerid.fit.__path__, "whiskerid.fit."):
     for name, obj in vars(importlib.import_module(info.name)).items():
         mine = str(getattr(obj, "__module__", "")).startswith("whiskerid.fit")
         if mine and (hasattr(obj, "lower") or type(obj).__name__ == "_JitWrapper"):

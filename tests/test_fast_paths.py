@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 import whiskerid as wi
-from whiskerid.fit import _release
-from whiskerid.fit._chi2 import chi2_sf
-from whiskerid.fit._fdist import f_sf
-from whiskerid.fit._lm import least_squares
+from whiskerid.fit._data import _release as _release
+from whiskerid.fit._numerics._chi2 import chi2_sf
+from whiskerid.fit._numerics._fdist import f_sf
+from whiskerid.fit._numerics._lm import lm_least_squares
 
 
 @pytest.mark.parametrize("k", [1, 2, 3, 4, 5, 8, 11])
@@ -69,7 +69,7 @@ def test_levenberg_marquardt_finds_scipys_optimum_of_the_decay_fit(seed):
         def resid(x, n=n):
             return _release._linear_fit(t, y, t[0], x[:n], np.abs(x[n:]))
 
-        ours, r = least_squares(resid, x0, max_nfev=200 * x0.size)
+        ours, r = lm_least_squares(resid, x0, max_nfev=200 * x0.size)
         ref = scipy_lsq(resid, x0, method="lm", max_nfev=200 * x0.size)
         assert np.allclose(np.abs(ours[:n]), np.abs(ref.x[:n]), rtol=1e-7), (ours, ref.x)
         assert np.allclose(np.abs(ours[n:]), np.abs(ref.x[n:]), rtol=1e-5), (ours, ref.x)
@@ -83,10 +83,10 @@ def test_levenberg_marquardt_stops_within_its_budget():
         calls.append(1)
         return np.array([10 * (x[1] - x[0] ** 2), 1 - x[0]])  # Rosenbrock
 
-    x, _ = least_squares(fun, np.array([-1.2, 1.0]), max_nfev=400)
+    x, _ = lm_least_squares(fun, np.array([-1.2, 1.0]), max_nfev=400)
     assert np.allclose(x, [1.0, 1.0], atol=1e-6)
     calls.clear()
-    least_squares(fun, np.array([-1.2, 1.0]), max_nfev=10)
+    lm_least_squares(fun, np.array([-1.2, 1.0]), max_nfev=10)
     assert len(calls) <= 10
 
 
@@ -95,7 +95,7 @@ def test_amplitude_test_reads_from_the_program_what_jax_computes_afterwards(monk
     """The score tests read mode 1's columns, w0, ζ0, the tip factor and the fitted linear
     part from the compiled calibration; computed again with JAX at the fit's optimum they
     are the same, and so is the test on them."""
-    from whiskerid.fit import _amplitude
+    from whiskerid.fit._choice import _amplitude as _amplitude
 
     seen = {}
     real = _amplitude.amplitude_test
@@ -129,7 +129,7 @@ def test_amplitude_test_reads_from_the_program_what_jax_computes_afterwards(monk
 def test_blas_is_held_to_one_thread_while_a_release_is_searched_and_restored_after():
     from threadpoolctl import threadpool_info
 
-    from whiskerid.fit import _threads
+    from whiskerid.fit._numerics import _threads as _threads
 
     seen = []
     real = _release._decay_in
@@ -158,15 +158,15 @@ def test_replaced_module_is_the_pytree_tree_at_builds_and_shares_the_layout():
     import equinox as eqx
     import jax
 
-    from whiskerid.fit import _core
-    from whiskerid.fit._problem import FitProblem
+    from whiskerid.fit._linear import _program as _core
+    from whiskerid.fit._linear._problem import FitProblem
 
     record = wi.paper_record()
     t = np.arange(500) / 200.0
     y = np.exp(-0.5 * t) * np.sin(2 * np.pi * 23.0 * t)
     obs = [wi.Observation(t, y, excitation="decay", observable="deflection", gain=1.0)] * 2
     problem = FitProblem.from_observations(record, obs, n_modes=2)
-    padded, masks = _core._padded(problem)
+    padded, masks = _core.padded_problem(problem)
     r = problem.recordings[0]
     size = _core.bucket(r.t.shape[0])
     t_pad = np.concatenate([np.asarray(r.t), np.full(size - r.t.shape[0], r.t[-1])])

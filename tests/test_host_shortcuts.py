@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 import whiskerid as wi
-from whiskerid.fit._calibrate import _per_recording
-from whiskerid.fit._checks import moments
-from whiskerid.fit._problem import FitProblem
-from whiskerid.fit._signal import line_fit, median
-from whiskerid.fit._start import _Envelope
+from whiskerid.fit._checks._checks import moments
+from whiskerid.fit._data._signal import line_fit, median
+from whiskerid.fit._linear._problem import FitProblem
+from whiskerid.fit._linear._start import _Envelope
+from whiskerid.fit._result import recording_diagnostics
 
 
 def test_the_median_is_numpys_to_the_last_bit():
@@ -93,7 +93,7 @@ def test_the_envelopes_first_run_by_slices_is_the_index_arrays(seed):
 
 
 def test_moments_passed_in_give_the_same_diagnostics():
-    """``_per_recording`` with the moments computed beside the program equals it computing
+    """``recording_diagnostics`` with the moments computed beside the program equals it computing
     them itself."""
     record = wi.paper_record()
     t = np.arange(600) / 200.0
@@ -105,6 +105,6 @@ def test_moments_passed_in_give_the_same_diagnostics():
     models = [(np.asarray(r.y) * 0.9, np.stack([np.asarray(r.y)] * 2, axis=1))
               for r in problem.recordings]  # fmt: skip
     resid = np.zeros(t.size)
-    a, _, _ = _per_recording(problem, opt, obs, models, resid)
-    b, _, _ = _per_recording(problem, opt, obs, models, resid, None, moments(obs))
+    a, _, _ = recording_diagnostics(problem, opt, obs, models, resid)
+    b, _, _ = recording_diagnostics(problem, opt, obs, models, resid, None, moments(obs))
     assert a == b and a[0]["rms_signal"] == float(np.std(y))

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from whiskerid.fit import _model_error as ME
+from whiskerid.fit._choice import _model_error as ME
 
 
 def test_step_map_is_the_difference_of_the_two_fits_and_its_sigma_its_scatter():
@@ -103,14 +103,14 @@ def test_a_strongly_damped_linear_pluck_is_not_amplitude_dependent():
 def test_a_score_column_the_fit_spans_is_left_out_not_a_singular_variance():
     """A fit to noise can leave an amplitude column that the fit's Jacobian spans (zero once
     projected): the score test is the one of the other columns (it raised LinAlgError)."""
-    from whiskerid.fit._amplitude import _score
+    from whiskerid.fit._choice._scores import score_statistic
 
     rng = np.random.default_rng(0)
     n = 200
     zp = np.stack([rng.normal(size=n), np.zeros(n), rng.normal(size=n)], axis=1)
     r = rng.normal(size=n) + 0.2 * zp[:, 0]
-    out, ref = _score(zp, r, r, [n]), _score(zp[:, [0, 2]], r, r, [n])
+    out, ref = score_statistic(zp, r, r, [n]), score_statistic(zp[:, [0, 2]], r, r, [n])
     assert out["dof"] == ref["dof"] == 2
     assert out["statistic"] == pytest.approx(ref["statistic"], rel=1e-12) and ref["statistic"] > 0
-    none = _score(np.zeros((n, 2)), r, r, [n])
+    none = score_statistic(np.zeros((n, 2)), r, r, [n])
     assert (none["dof"], none["statistic"], none["p_value"]) == (0, 0.0, 1.0)

@@ -8,14 +8,8 @@ import pytest
 from scipy.integrate import quad, solve_ivp
 
 from whiskerid.fit import Observation, calibrate, nominal_gain
-from whiskerid.fit._nl_logpoly import (
-    LogPolyBackbone,
-    backbone_at,
-    calibrate_logpoly_backbone,
-    knot_polynomial,
-    lagrange_matrix,
-)
-from whiskerid.fit._nonlinear import tip_per_sensor
+from whiskerid.fit._nonlinear import backbone_at, calibrate_logpoly_backbone, tip_per_sensor
+from whiskerid.fit._nonlinear._logpoly import LogPolyBackbone, knot_polynomial, lagrange_matrix
 from whiskerid.model import paper_record, slow_flow
 
 

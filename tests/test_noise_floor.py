@@ -6,8 +6,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from whiskerid.fit import _noise_floor as NF
-from whiskerid.fit._release import Decay
+from whiskerid.fit._data import _noise_floor as NF
+from whiskerid.fit._data._release import Decay
 
 
 def test_floor_ignores_offset_drift_and_tremor():

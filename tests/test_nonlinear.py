@@ -154,7 +154,7 @@ def test_coulomb_waveform_and_stop_are_the_exact_free_response():
     from the turn where friction stops it (friction_stop), is the exact piecewise solution
     (SciPy, restarted at each turn) to rounding, through the stop and the hold; the averaged
     a cos ψ alone misses by about F/ω₀² (the square wave's harmonics)."""
-    from whiskerid.fit._nonlinear import friction_stop, friction_waveform
+    from whiskerid.fit._nonlinear._friction import friction_stop, friction_waveform
 
     friction = 0.004 * np.pi * W0**2 * A0 / 2
     m = NonlinearMode(F0, 0.0, coulomb_m_s2=friction)
@@ -318,7 +318,7 @@ def test_a_change_under_the_size_rule_is_rejected_when_both_tests_agree(monkeypa
     With the size a rejection needs on its own raised above the change found (0.106 % here),
     the fit is still ``check``: both score tests reject (p 2e-7 and 2e-5), and that alone
     suffices; the nonlinear fit is ok within 3σ."""
-    from whiskerid.fit import _amplitude
+    from whiskerid.fit._choice import _amplitude as _amplitude
 
     monkeypatch.setattr(_amplitude, "MIN_REL_CHANGE_F", 2e-3)
     record, obs, truth = _pluck(rate=860.0, rise=0.001, zq=0.0, seed=6)
@@ -407,8 +407,9 @@ def test_nonlinear_recordings_in_one_bucket_share_programs_and_the_padding_count
     reference: a reference of another length is a program of its own (a compile of ~10 s);
     the second, padded by 18 rows that fall on its held level, is the harder case of the
     same padding (every term of the default model is fitted on both)."""
-    from whiskerid.fit import _nl_core, _short_windows
-    from whiskerid.fit._core import bucket
+    from whiskerid.fit._linear._program import bucket
+    from whiskerid.fit._nonlinear import _program as _nl_core
+    from whiskerid.fit._nonlinear import _short_windows as _short_windows
 
     compiles: list[str] = []
 

@@ -4,11 +4,11 @@ the joint least-squares solve's, which the score tests used to compute one by on
 import numpy as np
 import pytest
 
-from whiskerid.fit._amplitude import test_lags as lags_of
-from whiskerid.fit._checks import lag_below
-from whiskerid.fit._model_error import step_map
-from whiskerid.fit._projector import ColumnSubsets, LinearPart, pinv_columns
-from whiskerid.fit._signal import fast_length
+from whiskerid.fit._checks._checks import lag_below
+from whiskerid.fit._choice._model_error import step_map
+from whiskerid.fit._choice._scores import test_lags as lags_of
+from whiskerid.fit._data._signal import fast_length
+from whiskerid.fit._numerics._projector import ColumnSubsets, LinearPart, pinv_columns
 
 
 def _problem(seed=0, n=400, p=6, k=3):
@@ -86,8 +86,7 @@ def test_every_subsets_step_at_once_is_each_subsets_own_step():
 
 
 def test_white_statistics_are_the_score_tests_statistics_without_lags():
-    from whiskerid.fit._amplitude import _score
-    from whiskerid.fit._model_error import white_statistics
+    from whiskerid.fit._choice._scores import score_statistic, white_statistics
 
     jac, z, r = _problem(6)
     zp = LinearPart(jac).project(z)
@@ -98,7 +97,7 @@ def test_white_statistics_are_the_score_tests_statistics_without_lags():
     r_alts[1, :] = 0.0  # a variance of zero: its column is left out, T = 0
     stats, dof = white_statistics(zp, r, r_alts, todo, dof=True)
     for k, idx in enumerate(todo):
-        own = _score(zp[:, list(idx)], r, r_alts[k], [r.size], [0])
+        own = score_statistic(zp[:, list(idx)], r, r_alts[k], [r.size], [0])
         assert dof[k] == own["dof"]
         np.testing.assert_allclose(stats[k], own["statistic"], rtol=1e-10, atol=1e-300)
     assert stats[1] == 0.0 and dof[1] == 0

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from whiskerid.fit import CalibrationError, find_decays, observation_from_recording
-from whiskerid.fit._lsq import scaled_inverse_gram
+from whiskerid.fit._numerics._lsq import scaled_inverse_gram
 from whiskerid.io import Recording
 from whiskerid.model import paper_record, simulate, simulate_pluck
 
@@ -215,7 +215,7 @@ def test_no_held_sample_biases_the_decay(kind, f1, zeta, rate, seed, adc):
 def test_a_signal_toggling_at_nyquist_is_refused_without_a_fit_per_period(monkeypatch):
     """60 s toggling between two codes at 200 Hz: no decay, and the search does not fit a
     stretch around every 2-sample period (it took minutes)."""
-    import whiskerid.fit._release as release
+    import whiskerid.fit._data._release as release
 
     fits = []
     real = release._fit_tail
@@ -232,7 +232,7 @@ def test_a_signal_toggling_at_nyquist_is_refused_without_a_fit_per_period(monkey
 def test_a_failed_stretch_is_not_tried_again_sample_by_sample(monkeypatch):
     """A steady ringing that the tail fit refuses everywhere (here: its line is not the
     record's, the fit is made to say so) costs one fit per stretch tried, not per period."""
-    import whiskerid.fit._release as release
+    import whiskerid.fit._data._release as release
 
     fits = []
     monkeypatch.setattr(

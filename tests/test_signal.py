@@ -37,7 +37,7 @@ def test_find_peaks_interpolates_between_bins():
 
 
 def test_line_fit_is_polyfits_line_and_flat_through_one_distinct_x():
-    from whiskerid.fit._signal import line_fit
+    from whiskerid.fit._data._signal import line_fit
 
     rng = np.random.default_rng(4)
     x = np.sort(rng.uniform(-3, 50, 200))

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from whiskerid.fit._spectral_floor import spectral_whiteness
+from whiskerid.fit._checks._spectral_floor import spectral_whiteness
 
 
 def _ar1(rng, n, phi):

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from whiskerid.fit import FitProblem, Observation
-from whiskerid.fit._problem import recording_design
-from whiskerid.fit._signal import line_fit
-from whiskerid.fit._start import (
+from whiskerid.fit._data._signal import line_fit
+from whiskerid.fit._linear._problem import recording_design
+from whiskerid.fit._linear._start import (
     F_DECAY,
     F_FORCED,
     F_POINTS,

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 import whiskerid as wi
-from whiskerid.fit._core import _padded
-from whiskerid.fit._problem import ZETA_MAX, FitProblem
-from whiskerid.fit._varpro import linear_layout, projection
+from whiskerid.fit._linear._problem import ZETA_MAX, FitProblem
+from whiskerid.fit._linear._program import padded_problem
+from whiskerid.fit._linear._varpro import linear_layout, projection
 
 
 def test_the_layout_separates_each_recordings_coefficients_from_the_nonlinear_parameters():
@@ -111,7 +111,7 @@ def test_the_closed_form_jacobian_is_the_derivative_of_the_projected_residuals(k
     projected residuals computed another way (the coefficients by an SVD least squares,
     not a QR) and against central differences of those residuals."""
     problem = _problem(k)
-    padded, masks = _padded(problem)
+    padded, masks = padded_problem(problem)
     size = problem.flatten(problem.zero_params()).size
     fn, nl, _ = projection(padded, masks, size)
 
