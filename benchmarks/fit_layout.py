@@ -86,13 +86,15 @@ def strongly_connected(graph: dict[str, set[str]]) -> list[list[str]]:
 def main() -> None:
     graph = grimp.build_graph("whiskerid", cache_dir=None)
     fit_modules = {m for m in graph.modules if m == PACKAGE or m.startswith(PACKAGE + ".")}
-    # Packages' __init__ re-exports are left out of the cycles: a package importing its own
-    # modules is how re-exports work, not a cycle between jobs.
+    # A module importing a package it lies in (``from . import x``, ``from .. import y``) is
+    # left out: that package's __init__ imports the module back to re-export it, which is
+    # how re-exports work, not a cycle between jobs. A package's __init__ importing its own
+    # modules stays in, so a cycle through a sibling package's __init__ is found.
     edges = {
         m: {
             w
             for w in graph.find_modules_directly_imported_by(m)
-            if w in fit_modules and not (m == w.rsplit(".", 1)[0] or w == m.rsplit(".", 1)[0])
+            if w in fit_modules and not m.startswith(w + ".")
         }
         for m in fit_modules
     }

@@ -35,7 +35,7 @@ import numpy as np
 from .._checks import residual_spectra
 from .._data import check_noise_floor
 from .._linear import ZETA_MAX, padded_problem, positions, residuals_and_jacobian
-from .._nonlinear import tip_per_sensor
+from .._nonlinear import NL_TERMS, calibrate_nonlinear, tip_per_sensor
 from .._numerics import LinearPart
 from ._model_error import apply_model_error, model_error
 from ._scores import (
@@ -276,8 +276,6 @@ def choose_model(cal, observations, model: str, terms=None, *, resid=None, jac=N
     :func:`whiskerid.fit.calibrate_nonlinear`. The test's figures are in
     ``diagnostics["amplitude_test"]`` of the linear fit.
     """
-    from .._nonlinear import NL_TERMS, calibrate_nonlinear
-
     test = None
     if amplitude_test_applies(cal):
         test = amplitude_test(cal, resid=resid, jac=jac, core=core)
