@@ -33,10 +33,10 @@ def test_degrees_of_freedom_match_the_estimates_scatter():
 
 def test_quantum_and_rounding_floor():
     codes = np.round(np.random.default_rng(2).normal(5000, 4, 300))
-    assert NF.quantum(codes) == 1.0
+    assert NF.lattice_step(codes) == 1.0
     lsb = 4.096 / 32768
-    assert NF.quantum(codes * lsb) == pytest.approx(lsb, rel=1e-9)
-    assert NF.quantum(np.random.default_rng(3).normal(0, 1, 300)) == 0.0
+    assert NF.lattice_step(codes * lsb) == pytest.approx(lsb, rel=1e-9)
+    assert NF.lattice_step(np.random.default_rng(3).normal(0, 1, 300)) == 0.0
     # a stretch that sits on one code: the floor is the rounding of a moving signal, q/√12
     floor = NF.noise_floor(np.full(100, 7.0), q=1.0)
     assert floor["sigma"] == pytest.approx(1 / np.sqrt(12))

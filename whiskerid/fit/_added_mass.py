@@ -41,7 +41,7 @@ import numpy as np
 from jaxtyping import Array
 
 from ..model import CoilSpring, UniformBeam, Whisker, WhiskerRecord, cantilever_roots
-from ._checks import LAG1_MAX, check_fit, decay_rates, hac_covariance, no_smaller_than
+from ._checks import LAG1_MAX, check_fit, decay_sampling_rates_hz, hac_covariance, no_smaller_than
 from ._data import CalibrationError, Observation
 from ._linear import (
     GTOL,
@@ -475,8 +475,9 @@ def calibrate_added_mass(
     checks = {}
     if ok:
         nominal = record.whisker().with_modes(n_modes)
+        rates = decay_sampling_rates_hz(obs)
         checks = check_fit(params, per_rec, float(nominal.natural_frequencies_hz[0]),
-                           decay_rates_hz=decay_rates(obs), f1_expected_hz=f1_start_hz)  # fmt: skip
+                           decay_rates_hz=rates, f1_expected_hz=f1_start_hz)  # fmt: skip
         small = added_mass_check(params, problem, record)
         if small is not None:
             checks["added-mass-small"] = small

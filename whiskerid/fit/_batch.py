@@ -30,7 +30,8 @@ import numpy as np
 
 from .._choices import PINS
 from ..model import WhiskerRecord
-from ._checks import check_fit, decay_rates, lag1, residual_peak
+from ._checks import check_fit, lag1, residual_peak
+from ._checks import decay_sampling_rates_hz as decay_rates
 from ._data import CalibrationError, Observation
 from ._linear import FitProblem, flat_residuals, reported_names, solve_status, start_values
 from ._linear import solve_masked as solve

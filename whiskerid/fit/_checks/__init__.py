@@ -6,7 +6,7 @@ from ._checks import LAG1_MAX as LAG1_MAX
 from ._checks import bartlett_meat as bartlett_meat
 from ._checks import check_fit as check_fit
 from ._checks import data_side as data_side
-from ._checks import decay_rates as decay_rates
+from ._checks import decay_sampling_rates_hz as decay_sampling_rates_hz
 from ._checks import hac_covariance as hac_covariance
 from ._checks import lag1 as lag1
 from ._checks import lag_below as lag_below

@@ -358,7 +358,7 @@ def aliased(f1_hz: float, f1_expected_hz: float, rates_hz) -> float | None:
     return alias if (above or nearer) else None
 
 
-def decay_rates(observations) -> list[float]:
+def decay_sampling_rates_hz(observations) -> list[float]:
     """Sampling rates (Hz, :func:`whiskerid.io.timestamp_rate`) of the free-decay
     observations."""
     return [timestamp_rate(o.t, where=o.name) for o in observations if o.excitation == "decay"]
@@ -372,6 +372,6 @@ def moments(obs) -> list[tuple[float, float]]:
 
 def data_side(obs) -> tuple[list, list[float]]:
     """What the checks read of the recordings alone (:func:`peak_reference` of each, the free
-    decays' sampling rates, :func:`decay_rates`): a calibration computes it while its compiled
-    program runs."""
-    return [peak_reference(o.t, o.y) for o in obs], decay_rates(obs)
+    decays' sampling rates, :func:`decay_sampling_rates_hz`): a calibration computes it while its
+    compiled program runs."""
+    return [peak_reference(o.t, o.y) for o in obs], decay_sampling_rates_hz(obs)

@@ -88,7 +88,8 @@ def amplitude_test(cal, *, resid=None, jac=None, core=None) -> dict:
     if resid is None or jac is None:
         resid, jac = residuals_and_jacobian(problem, problem.flatten(opt))
     r, jac = np.asarray(resid), np.asarray(jac)
-    cols, info = _columns(problem, opt, core if core is not None else _whisker_terms(problem, opt))
+    terms = core if core is not None else _whisker_terms(problem, opt)
+    cols, info = _score_columns(problem, opt, terms)
     out = {}
     # factored once for the two tests and the model-error subsets (by the program, if given)
     lin = LinearPart(jac, None if core is None else core.get("svd"))
@@ -141,7 +142,7 @@ def amplitude_test(cal, *, resid=None, jac=None, core=None) -> dict:
 
 
 def _whisker_terms(problem, opt) -> dict:
-    """What :func:`_columns` reads of the whisker at ``opt`` (as ``CoreResult.amplitude``),
+    """What :func:`_score_columns` reads of the whisker at ``opt`` (as ``CoreResult.amplitude``),
     computed with JAX here (a calibration's compiled program returns it)."""
     w = problem.whisker(opt)
     nm = problem.n_modes
@@ -161,7 +162,7 @@ def _whisker_terms(problem, opt) -> dict:
     }
 
 
-def _columns(problem, opt, terms):
+def _score_columns(problem, opt, terms):
     """Score columns per recording (weighted like the residuals) and the amplitudes."""
     nm = problem.n_modes
     w0, z0 = terms["w0"], terms["zeta0"]

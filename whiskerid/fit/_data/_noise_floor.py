@@ -69,7 +69,7 @@ def quiet_stretch(t, y, decays, k: int) -> np.ndarray | None:
     return None
 
 
-def quantum(y) -> float:
+def lattice_step(y) -> float:
     """The step of a quantised signal (ADC codes, or volts on a lattice of codes), 0 when the
     samples are not on a lattice."""
     values = np.unique(np.asarray(y, dtype=float))
@@ -123,7 +123,7 @@ def floor_test(per_rec: list[dict], obs, n_params: int) -> dict:
         if quiet is None or np.size(quiet) < MIN_QUIET:
             out.append({"name": o.name, "tested": False, "why": "no quiet stretch"})
             continue
-        floor = noise_floor(quiet, quantum(np.concatenate([np.asarray(o.y), quiet])))
+        floor = noise_floor(quiet, lattice_step(np.concatenate([np.asarray(o.y), quiet])))
         if not floor["sigma"] > 0:  # an exactly constant stretch, no converter step known
             out.append({"name": o.name, "tested": False, "why": "a quiet stretch with no noise"})
             continue

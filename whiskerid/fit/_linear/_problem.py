@@ -358,8 +358,9 @@ def solve(problem: FitProblem, params, *, solver: str = "levenberg-marquardt",
 
 @eqx.filter_jit
 def covariance(problem: FitProblem, flat) -> tuple[Array, Array]:
-    """``s²(JᵀJ)⁻¹`` of the flat parameters at ``flat`` and ``s²`` (see ``lsq.covariance``)."""
-    return lsq.covariance(flat_residuals, flat, problem)
+    """``s²(JᵀJ)⁻¹`` of the flat parameters at ``flat`` and ``s²`` (see
+    ``lsq.residual_covariance``)."""
+    return lsq.residual_covariance(flat_residuals, flat, problem)
 
 
 @eqx.filter_jit
@@ -369,7 +370,7 @@ def residuals_and_jacobian(problem: FitProblem, flat) -> tuple[Array, Array]:
 
 
 @eqx.filter_jit
-def gradient_cosine(problem: FitProblem, flat) -> Array:
+def problem_gradient_cosine(problem: FitProblem, flat) -> Array:
     """MINPACK's stationarity measure at ``flat`` (see ``lsq.gradient_cosine``)."""
     return lsq.gradient_cosine(flat_residuals, flat, problem)
 

@@ -289,7 +289,7 @@ def solve_masked(problem: FitProblem, masks, flat0, *, solver: str, max_steps: i
         max_steps: Solver step limit.
     """
     if solver == "levenberg-marquardt":
-        return _varpro.least_squares(problem, masks, flat0, max_steps=max_steps)
+        return _varpro.varpro_least_squares(problem, masks, flat0, max_steps=max_steps)
     res = lsq.least_squares(
         _masked_residuals, flat0, (problem, _mask_vector(problem, masks)),
         solver=lsq.make_solver(solver, rtol=RTOL, atol=ATOL), max_steps=max_steps,

@@ -123,7 +123,7 @@ def _design_jacobian(design, phi):
     return jax.vmap(lambda e: jax.jvp(design, (phi,), (e,)), out_axes=(None, -1))(basis)
 
 
-def least_squares(problem: FitProblem, masks, flat0, *, max_steps: int):
+def varpro_least_squares(problem: FitProblem, masks, flat0, *, max_steps: int):
     """Minimise the problem's weighted residuals from ``flat0`` by variable projection.
 
     Args:

@@ -32,7 +32,7 @@ import numpy as np
 from ...model import NonlinearMode
 from .._checks import (
     check_fit,
-    decay_rates,
+    decay_sampling_rates_hz,
     hac_covariance,
     no_smaller_than,
     residual_peak,
@@ -59,7 +59,7 @@ from ._problem import (
     NonlinearProblem,
     observed_per_metre,
 )
-from ._program import reported_with_jacobian, solve_nonlinear
+from ._program import nonlinear_reported_with_jacobian, solve_nonlinear
 from ._short_windows import short_window_points
 
 #: Points of the reported backbone between the smallest and largest amplitudes.
@@ -182,7 +182,7 @@ def fit_nonlinear(
     checks: dict[str, str] = {}
     if ok:
         f1_nom = float(linear.record.whisker().natural_frequencies_hz[0])
-        checks = check_fit(params, per_rec, f1_nom, decay_rates_hz=decay_rates(obs))
+        checks = check_fit(params, per_rec, f1_nom, decay_rates_hz=decay_sampling_rates_hz(obs))
         # residuals at the whisker's frequency after the nonlinear model: a lag-1 test
         # does not see them, the HAC 1σ does allow for them
         checks.pop("correlated-residuals", None)
@@ -291,7 +291,7 @@ def _amplitude_grid(envelopes, per_rec) -> np.ndarray:
 
 
 def _nonlinear_params(problem, flat, cov, cov_white, grid, linear):
-    values, jac = reported_with_jacobian(problem, flat, grid)
+    values, jac = nonlinear_reported_with_jacobian(problem, flat, grid)
     names = _reported_names(problem, flat, grid)
     dcov = jac @ cov @ jac.T
     std = np.sqrt(np.maximum(np.diag(dcov), 0.0))

@@ -63,7 +63,7 @@ def padded(problem):
     return out, sizes
 
 
-def _weighted(problem, weights):
+def _nonlinear_weighted(problem, weights):
     n = len(problem.base.recordings)
     return eqx.tree_at(lambda q: [r.weight for r in q.base.recordings], problem,
                        [weights[i] for i in range(n)])  # fmt: skip
@@ -94,7 +94,7 @@ def nonlinear_core(problem, flat0, *, solver: str, max_steps: int, observed_per_
     # the time to load from the cache.
     def one_pass(carry, _):
         flat, weights = carry
-        weighted = _weighted(problem, weights)
+        weighted = _nonlinear_weighted(problem, weights)
         res = lsq.least_squares(_flat_residuals, flat, weighted, solver=solver_impl,
                                  max_steps=max_steps)  # fmt: skip
         new = _weights(weighted, problem.unflatten(res.value))
@@ -102,7 +102,7 @@ def nonlinear_core(problem, flat0, *, solver: str, max_steps: int, observed_per_
 
     start = jnp.stack([r.weight for r in problem.base.recordings])
     (flat, _), (ok, steps, cost, used) = jax.lax.scan(one_pass, (flat0, start), None, length=2)
-    problem = _weighted(problem, used[-1])
+    problem = _nonlinear_weighted(problem, used[-1])
     resid = _flat_residuals(flat, problem)
     jac = jax.jacfwd(_flat_residuals)(flat, problem)
     n_real = sum(jnp.sum(m) for m in problem.masks)  # the padding counts for nothing
@@ -164,7 +164,7 @@ def solve_nonlinear(problem, flat0, *, solver: str, max_steps: int, observed_per
     return problem, out
 
 
-def reported_with_jacobian(problem, flat, amplitudes) -> tuple[np.ndarray, np.ndarray]:
+def nonlinear_reported_with_jacobian(problem, flat, amplitudes) -> tuple[np.ndarray, np.ndarray]:
     """:func:`nonlinear_reported` through the program cache: ``(values, jacobian)`` (the
     problem padded to its buckets: the values do not read the samples, the program's key
     does)."""

@@ -83,7 +83,7 @@ def _batch(fn, y0, args, solver, max_steps):
     )(y0, args)
 
 
-def covariance(fn, y, args=None) -> tuple[jax.Array, jax.Array]:
+def residual_covariance(fn, y, args=None) -> tuple[jax.Array, jax.Array]:
     """Parameter covariance from the Jacobian at the optimum, scaled by the residual variance.
 
     ``Σ = s² (JᵀJ)⁻¹`` with ``s² = ‖r‖²/(n − p)``; ``y`` must be a flat 1-D array.
