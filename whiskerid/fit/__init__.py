@@ -10,7 +10,7 @@ covariance.
 """
 
 from .. import _jax_setup as _jax_setup
-from ..io import sha256_of as sha256_of  # where fit's users found it before
+from ..io import sha256_of as sha256_of  # its home is whiskerid.io (kept: posterior, cli use it)
 from ._added_mass import AddedMass as AddedMass
 from ._added_mass import AddedMassProblem as AddedMassProblem
 from ._added_mass import calibrate_added_mass as calibrate_added_mass

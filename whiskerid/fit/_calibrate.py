@@ -17,18 +17,18 @@ uncertainty propagated through the Jacobian:
 A tip mass makes the mode-frequency ratios depend on ``μ = M_t/(ρa l)``, so on ρa, but only
 weakly; μ is taken from the record unless a static test fixes ρa.
 
-The model (:class:`whiskerid.fit.FitProblem`, module ``_problem``) is linear in most
-nuisances, ``y = D(θ) c + g(θ)``. Start values come from the data (module ``_start``: a
+The model (:class:`whiskerid.fit.FitProblem`, module ``_linear._problem``) is linear in most
+nuisances, ``y = D(θ) c + g(θ)``. Start values come from the data (module ``_linear._start``: a
 grid over ``(κ, ζ)`` seeded by the spectral peaks and the envelope's logarithmic decay, with
 the linear coefficients solved exactly at every grid point); the best point starts a
-Levenberg–Marquardt fit by variable projection (module ``_varpro``: the linear coefficients
+Levenberg–Marquardt fit by variable projection (module ``_linear._varpro``: the linear coefficients
 solved at every point; optimistix's dogleg or Gauss–Newton over all parameters on request),
 with a status per fit.
 The covariance is ``s²(JᵀJ)⁻¹`` at the optimum (through the SVD of the column-scaled
 Jacobian, see :func:`whiskerid.fit.covariance`); with several recordings (or a static test)
 each block is weighted by its own residual scale from a first pass. When the residuals are
 correlated a HAC (Newey–West) sandwich replaces it, and a converged fit must pass the checks
-of module ``_checks`` (residuals, bounds, plausibility, precision) to be called ``ok``.
+of sub-package ``_checks`` (residuals, bounds, plausibility, precision) to be called ``ok``.
 
 jaxopt is not used as a second backend: version 0.8.5 warns on import that it is no longer
 maintained (which fails a test run with ``filterwarnings = error``) and its
@@ -125,12 +125,12 @@ def calibrate(
             :func:`whiskerid.fit.calibrate_added_mass`); ``pin`` and ``static`` are then not
             used.
         modulus_tolerance: Relative 1σ of the record's modulus under ``pin="material"``,
-            carried into ρa's and C's 1σ (default 20 %, see ``whiskerid.fit._modulus``).
+            carried into ρa's and C's 1σ (default 20 %, see ``whiskerid.fit._linear._modulus``).
         model: ``linear`` (default; free decays are also tested for amplitude-dependent
             frequency and damping, ``check`` when found), ``nonlinear`` (cubic stiffness and
             amplitude-dependent damping of mode 1, free decays only: a
             :class:`whiskerid.fit.NonlinearCalibration`) or ``auto`` (nonlinear when the
-            test rejects the linear fit). See :mod:`whiskerid.fit._amplitude`.
+            test rejects the linear fit). See :mod:`whiskerid.fit._choice._amplitude`.
         nl_terms: The nonlinear model's terms (default all: ``cubic``, ``quadratic``,
             ``coulomb``).
         free_modes: The nonlinear model's modes 2… with their own frequency and damping,
@@ -188,7 +188,7 @@ def calibrate(
         record, obs, static=static, n_modes=n_modes, zeta_per_mode=zeta_per_mode, pin=pin,
         nominal=nominal,
     )  # fmt: skip
-    # One compiled program (module _core): the start grid over (κ, ζ) with the linear
+    # One compiled program (module _linear._program): the start grid over (κ, ζ) with the linear
     # coefficients solved exactly, the solve, each block (recording, static test) weighted by
     # its own residual scale (s² ≈ 1, a reduced χ²), and one Jacobian at the optimum for the
     # covariance, the gradient test and the HAC below.

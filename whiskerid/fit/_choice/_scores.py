@@ -83,7 +83,7 @@ def score_statistic(zp, r, r_alt, sizes, lags=None):
     s = zp.T @ r
     # a column the fit's own Jacobian spans (zero once projected: e.g. an envelope that is
     # zero where a fit to noise put ζ at its bound) carries no information: left out, not a
-    # singular variance (it was a LinAlgError)
+    # singular variance
     keep = np.diag(v) > 0
     if not keep.all():
         v, s = v[np.ix_(keep, keep)], s[keep]

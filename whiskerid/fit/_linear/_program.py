@@ -347,7 +347,7 @@ def fit_core(problem: FitProblem, masks, first: dict, *, solver: str, max_steps:
     Args:
         problem: The (padded) fit problem.
         masks: Per recording, 1 for a sample and 0 for padding.
-        first: The start grid (:func:`whiskerid.fit._start.start_grid`), or ``{"flat0": …}``.
+        first: The start grid (:func:`._start.start_grid`), or ``{"flat0": …}``.
         solver: Least-squares solver name.
         max_steps: Solver step limit.
 

@@ -430,7 +430,7 @@ def _profile_cost(problem, steps, masks, log_kappa, zeta_u, log_ei):
 
 
 def profile_rows(rec, w: Whisker):
-    """The design of :func:`whiskerid.fit._problem.recording_design` with ``profile=True``
+    """The design of :func:`whiskerid.fit._linear._problem.recording_design` with ``profile=True``
     (a known forced response as free columns too), transposed: ``(columns, samples)``.
 
     The same numbers, laid out so that the profile's sums over the samples (the columns'

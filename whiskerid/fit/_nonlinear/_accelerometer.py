@@ -14,7 +14,7 @@ leaving it out biases γ by about −25 % (−4σ on a 40 dB pluck); both parts 
 ``K(a)/K(a₀)`` (the coefficients hold ``K(a₀)``).
 
 Dry friction is not in ``r``: an accelerometer reads its quadrature through the staircase of
-:func:`whiskerid.fit._nl_friction._friction_offset`.
+:func:`whiskerid.fit._nonlinear._friction._friction_offset`.
 """
 
 import equinox as eqx

@@ -2,7 +2,7 @@
 
 The slow flow follows the staircase of a decay under Coulomb friction with a straight line
 through its middles; these functions give the exact departure from it and where the motion
-stops (see the physics page), for :class:`whiskerid.fit._nonlinear.NonlinearProblem`.
+stops (see the physics page), for :class:`whiskerid.fit.NonlinearProblem`.
 """
 
 import jax.numpy as jnp

@@ -147,7 +147,7 @@ class LogPolyBackbone(eqx.Module):
 
 
 def logpoly_mode(problem, params) -> LogPolyBackbone:
-    """The backbone of a log-polynomial :class:`whiskerid.fit._nonlinear.NonlinearProblem` at
+    """The backbone of a log-polynomial :class:`whiskerid.fit.NonlinearProblem` at
     ``params`` (``nl`` = ``S_f`` then ``S_z`` at knots 2…)."""
     w = problem.base.whisker(params)
     k = problem.n_knots

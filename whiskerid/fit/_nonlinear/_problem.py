@@ -42,7 +42,7 @@ class NonlinearProblem(eqx.Module):
             (:mod:`._nl_logpoly`; ``nl`` then holds its values at knots 2…).
         ln_a_lo: ``ln a_lo`` (m) of a log-polynomial backbone's first knot (None without one).
         masks: Per recording, 1 for a sample and 0 for the zero-weight padding of its shape
-            bucket (:func:`whiskerid.fit._nl_core.padded`); None when not padded.
+            bucket (:func:`whiskerid.fit._nonlinear._program.padded`); None when not padded.
     """
 
     base: FitProblem

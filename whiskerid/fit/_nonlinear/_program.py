@@ -1,7 +1,7 @@
 """The numbers of a nonlinear calibration as two compiled programs, kept between runs.
 
 Everything :func:`whiskerid.fit.calibrate_nonlinear` computes with JAX is two traced
-functions, each run through :func:`whiskerid.fit._aot.cached_call` (one program per problem
+functions, each run through :func:`whiskerid.fit._numerics.cached_call` (one program per problem
 structure and shape bucket, exported on disk and loaded by later runs without tracing):
 
 * :func:`nonlinear_core`: the least squares from the linear optimum, each recording weighted

@@ -47,7 +47,7 @@ class Calibration:
         curves: Per recording ``(t, y, model)`` in observed units (for plots).
         warnings: What the user should check (one sentence each), e.g. a poor fit.
         checks: The failed checks of a converged fit, name → sentence (see
-            :mod:`whiskerid.fit._checks`); empty for ``ok``.
+            :mod:`whiskerid.fit._checks._checks`); empty for ``ok``.
         problem: The fitted :class:`whiskerid.fit.FitProblem` (each recording weighted by
             its own residual scale).
         optimum: The parameter pytree at the optimum (``problem.flatten(optimum)`` is the

@@ -12,7 +12,7 @@ from helpers import ALU
 import whiskerid as wi
 from whiskerid.fit import GTOL, gradient_cosine, release_time
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "cantilever"
+DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "cantilever"
 
 
 def _off_by_30_percent(rec: wi.WhiskerRecord) -> wi.WhiskerRecord:

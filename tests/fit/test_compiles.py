@@ -221,7 +221,7 @@ def test_the_library_in_a_fresh_interpreter_compiles_nothing_the_cache_holds(tmp
     sim = wi.simulate(wi.paper_record(), excitation="decay", observable="adc", rate_hz=200.0,
                       duration_s=3.0, noise_db=30.0, seed=1, tip_deflection_m=2e-3)  # fmt: skip
     wi.write_csv(tmp_path / "pluck.csv", sim)
-    record = Path(__file__).resolve().parents[1] / "fits" / "paper-whisker.toml"
+    record = Path(__file__).resolve().parents[2] / "fits" / "paper-whisker.toml"
     env = {**os.environ, "WHISKERID_COMPILE_CACHE": str(tmp_path / "cache")}
     env.pop("JAX_COMPILATION_CACHE_DIR", None)
     argv = [sys.executable, "-c", _LIBRARY, str(tmp_path / "pluck.csv"), str(record)]
