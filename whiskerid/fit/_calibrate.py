@@ -146,19 +146,7 @@ def calibrate(
     if not obs:
         raise CalibrationError("no recordings to calibrate")
     modulus_tolerance = check_tolerance(modulus_tolerance)
-    if model not in ("linear", "nonlinear", "auto"):
-        raise CalibrationError(f"model must be linear, nonlinear or auto, not {model!r}")
-    if model == "nonlinear" and (static is not None or any(o.excitation != "decay" for o in obs)):
-        raise CalibrationError(
-            "the nonlinear model fits free decays only (no sine, base motion or static test); "
-            "fit those with --model linear"
-        )
-    if free_modes:
-        _check_free_modes(model, n_modes, static, obs)
-    if added_mass is not None and model != "linear":
-        raise CalibrationError(
-            "the added-mass method fits the linear model; leave out --model (or give linear)"
-        )
+    _check_model(model, obs, static, free_modes, n_modes, added_mass)
     if added_mass is not None:
         if static is not None:
             raise CalibrationError("give a static test or added masses, not both")
@@ -166,22 +154,7 @@ def calibrate(
                                     zeta_per_mode=zeta_per_mode, solver=solver,
                                     max_steps=max_steps, f1_start_hz=f1_start_hz,
                                     start=start)  # fmt: skip
-    if pin not in PINS:
-        raise CalibrationError(f"pin must be one of {PINS}, not {pin!r}")
-    if not 1 <= n_modes <= 10:
-        raise CalibrationError(f"n_modes = {n_modes} must be between 1 and 10")
-    for o in obs:  # sums of squares of such samples overflow: no fit can be computed
-        if float(np.max(np.abs(o.y))) > MAX_SAMPLE:
-            raise CalibrationError(
-                f"{o.name}: the samples reach {float(np.max(np.abs(o.y))):.3g}, too large to "
-                "fit in any units (their squares overflow): scale the signal to the "
-                "observable's units (--scale)"
-            )
-    if f1_start_hz is not None and not (np.isfinite(f1_start_hz) and f1_start_hz > 0):
-        raise CalibrationError(
-            f"the f1 to start from ({f1_start_hz!r} Hz, --f1-start) must be a positive "
-            "frequency: give the frequency in Hz that the whisker rings at, or leave it out"
-        )
+    _check_linear(obs, pin, n_modes, f1_start_hz)
     pin = "geometry" if pin == "auto" else pin
     nominal = nominal_whisker(record, n_modes)
     problem = FitProblem.from_observations(
@@ -196,8 +169,8 @@ def calibrate(
         raise CalibrationError(f"solver must be one of {', '.join(SOLVERS)}; got {solver!r}")
     res = fit_problem(problem, obs, nominal, solver=solver, max_steps=max_steps,
                       f1_start_hz=f1_start_hz, start=start,
-                      meanwhile=lambda: (data_side(obs), recording_moments(obs)))  # fmt: skip
-    (peak_refs, rates), moments = res.meanwhile
+                      host_work=lambda: (data_side(obs), recording_moments(obs)))  # fmt: skip
+    (peak_refs, rates), moments = res.host_work_result
     problem, resid_w, jac, bread, s2 = res.problem, res.resid, res.jac, res.bread, res.s2
     cov = s2 * bread
     # The solver's own test (steps below rtol 1e-10 of every parameter) can stall at
@@ -257,6 +230,43 @@ def calibrate(
     # amplitude dependence and the choice of model
     return choose_model(out, obs, model, nl_terms, resid=resid_w, jac=jac, core=res.amplitude,
                   free_modes=free_modes)  # fmt: skip
+
+
+def _check_model(model: str, obs, static, free_modes: bool, n_modes: int, added_mass) -> None:
+    """Refuse a model the recordings (or the other arguments) cannot be fitted with."""
+    if model not in ("linear", "nonlinear", "auto"):
+        raise CalibrationError(f"model must be linear, nonlinear or auto, not {model!r}")
+    if model == "nonlinear" and (static is not None or any(o.excitation != "decay" for o in obs)):
+        raise CalibrationError(
+            "the nonlinear model fits free decays only (no sine, base motion or static test); "
+            "fit those with --model linear"
+        )
+    if free_modes:
+        _check_free_modes(model, n_modes, static, obs)
+    if added_mass is not None and model != "linear":
+        raise CalibrationError(
+            "the added-mass method fits the linear model; leave out --model (or give linear)"
+        )
+
+
+def _check_linear(obs, pin: str, n_modes: int, f1_start_hz) -> None:
+    """Refuse a pin, a number of modes, samples or a start frequency no fit can use."""
+    if pin not in PINS:
+        raise CalibrationError(f"pin must be one of {PINS}, not {pin!r}")
+    if not 1 <= n_modes <= 10:
+        raise CalibrationError(f"n_modes = {n_modes} must be between 1 and 10")
+    for o in obs:  # sums of squares of such samples overflow: no fit can be computed
+        if float(np.max(np.abs(o.y))) > MAX_SAMPLE:
+            raise CalibrationError(
+                f"{o.name}: the samples reach {float(np.max(np.abs(o.y))):.3g}, too large to "
+                "fit in any units (their squares overflow): scale the signal to the "
+                "observable's units (--scale)"
+            )
+    if f1_start_hz is not None and not (np.isfinite(f1_start_hz) and f1_start_hz > 0):
+        raise CalibrationError(
+            f"the f1 to start from ({f1_start_hz!r} Hz, --f1-start) must be a positive "
+            "frequency: give the frequency in Hz that the whisker rings at, or leave it out"
+        )
 
 
 def _check_free_modes(model: str, n_modes: int, static, obs) -> None:

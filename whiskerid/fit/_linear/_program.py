@@ -84,7 +84,7 @@ class CoreResult:
             coefficients), so that the test runs in NumPy; and ``svd``, the SVD of the
             column-scaled Jacobian behind ``bread`` (``(scale, U, S, Vᵀ)``, real rows of
             ``U``), which the test projects on instead of taking it again.
-        meanwhile: What ``fit_problem``'s ``meanwhile`` returned.
+        host_work_result: What ``fit_problem``'s ``host_work`` returned.
     """
 
     value: np.ndarray
@@ -101,7 +101,7 @@ class CoreResult:
     models: list[tuple[np.ndarray, np.ndarray]]
     reported: tuple[np.ndarray, np.ndarray]
     amplitude: dict
-    meanwhile: object = None
+    host_work_result: object = None
 
 
 def fit_problem(
@@ -113,7 +113,7 @@ def fit_problem(
     max_steps: int,
     f1_start_hz: float | None = None,
     start: dict | None = None,
-    meanwhile=None,
+    host_work=None,
 ) -> CoreResult:
     """Start values, least squares, weights, covariance and reported values of ``problem``
     in one compiled program (see the module docstring).
@@ -126,7 +126,7 @@ def fit_problem(
         max_steps: Solver step limit.
         f1_start_hz: Centre of the start search (the record's f_1 when None).
         start: Start parameters instead of the grid search (a parameter pytree).
-        meanwhile: A function of no arguments run while the program runs (JAX returns
+        host_work: A function of no arguments run while the program runs (JAX returns
             before the program ends): host work that does not need its results.
     """
     sizes = [r.t.shape[0] for r in problem.recordings]
@@ -137,7 +137,7 @@ def fit_problem(
         first = {"flat0": np.asarray(problem.flatten(start))}
     fn = functools.partial(fit_core, solver=solver, max_steps=max_steps)
     out = cached_call("calibrate", fn, (padded, masks, first), static=(solver, max_steps))
-    extra = meanwhile() if meanwhile is not None else None
+    extra = host_work() if host_work is not None else None
     out = {k: np.asarray(v) for k, v in out.items()}
     rows = padded_rows(sizes, [m.size for m in masks], out["resid"].size)
     weights = [np.asarray(w) for w in out["weights"]]
@@ -168,7 +168,7 @@ def fit_problem(
             "dc": [out[f"dc_{i}"][:n] for i, n in enumerate(sizes)],
             "svd": (out["svd_d"], out["svd_u"][rows], out["svd_s"], out["svd_vt"]),
         },
-        meanwhile=extra,
+        host_work_result=extra,
     )
 
 

@@ -13,7 +13,7 @@ structure and shape bucket, exported on disk and loaded by later runs without tr
   with their Jacobian (the grid is read from the first program's envelopes and noise, so it
   is a second program).
 
-Shape buckets, as the linear fit's (module ``_core``): every recording is padded to its
+Shape buckets, as the linear fit's (module ``_linear._program``): every recording is padded to its
 bucket with zero-weight samples (its last instant repeated: the slow flow takes steps of
 length 0 there and the design's time span is the recording's own), so that recordings of
 other lengths in one bucket share both programs. The padding enters no sum: residuals and

@@ -1,6 +1,6 @@
 """Programs compiled once per machine: exported on disk, executables in JAX's persistent cache.
 
-A calibration is one compiled program per structure and shape bucket (module ``_core``).
+A calibration is one compiled program per structure and shape bucket (module ``_linear._program``).
 Calling a jitted function in a fresh interpreter traces it and lowers it to StableHLO before
 JAX's persistent compilation cache can even be asked for the executable: about a second for
 the calibration's solver, every run. Here the lowered program is kept instead, as a
