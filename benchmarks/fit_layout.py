@@ -1,6 +1,7 @@
 """Benchmark: the layout of ``whiskerid.fit``, measured from its source (issue 45's before/after).
 
-Prints one JSON object: the import cycles among fit's modules (strongly connected components of
+Prints one JSON object: which room (module or sub-package directly below fit) imports which,
+the import cycles among fit's modules (strongly connected components of
 the import graph grimp builds, deferred imports included), the number of imports inside
 functions, the private names imported from another fit module (and from another sub-package of
 fit), the module-level function names defined in more than one fit module, the number of modules
@@ -99,6 +100,15 @@ def main() -> None:
         for m in fit_modules
     }
     cycles = strongly_connected(edges)
+    # The drawing of the layout: which room (module or sub-package directly below fit) imports
+    # which others.
+    rooms: dict[str, set[str]] = defaultdict(set)
+    for m, targets in edges.items():
+        if m == PACKAGE:
+            continue
+        for w in targets:
+            if w != PACKAGE and sub_package(w) != sub_package(m):
+                rooms[sub_package(m).rsplit(".", 1)[1]].add(sub_package(w).rsplit(".", 1)[1])
 
     inner_imports = []
     private_imports = []
@@ -153,6 +163,7 @@ def main() -> None:
                 "modules": len(files),
                 "lines": lines,
                 "cycles": cycles,
+                "room_imports": {k: sorted(v) for k, v in sorted(rooms.items())},
                 "modules_in_cycles": sum(len(c) for c in cycles),
                 "imports_inside_functions": len(inner_imports),
                 "imports_inside_functions_at": inner_imports,
