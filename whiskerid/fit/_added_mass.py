@@ -57,12 +57,14 @@ from ._linear import (
 from ._numerics import gradient_cosine_from, lsq, residual_variance, scaled_inverse_gram
 from ._result import (
     Calibration,
+    correlation_table,
     fit_diagnostics,
     fit_status,
     poor_fit_warnings,
     record_with_fit,
     recording_blocks,
     recording_diagnostics,
+    reported_std,
 )
 
 #: A fit whose ρa (so EI and C) has a relative 1σ above this is flagged: the mass is too
@@ -451,9 +453,7 @@ def calibrate_added_mass(
     names = reported_names(problem)
     values, rjac = (np.asarray(a) for a in reported_with_jacobian(problem, res.value))
     dcov = rjac @ cov @ rjac.T
-    std = np.sqrt(np.maximum(np.diag(dcov), 0.0))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        corr = dcov / np.outer(std, std)
+    std = reported_std(dcov)
     params = {}
     for i, name in enumerate(names):
         source = "fit"
@@ -486,7 +486,7 @@ def calibrate_added_mass(
         status=status,
         ok=ok,
         params=params,
-        correlations={"names": list(names), "matrix": np.round(np.nan_to_num(corr), 6).tolist()},
+        correlations=correlation_table(names, dcov, std),
         fixed=fixed,
         note=note,
         diagnostics=diagnostics,

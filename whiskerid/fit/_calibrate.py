@@ -66,12 +66,14 @@ from ._linear import (
 from ._numerics import single_blas_thread, with_compile_cache
 from ._result import (
     Calibration,
+    correlation_table,
     fit_diagnostics,
     fit_status,
     poor_fit_warnings,
     record_with_fit,
     recording_blocks,
     recording_diagnostics,
+    reported_std,
 )
 
 #: Samples larger than this (in any units) are refused: their squares and sums overflow.
@@ -295,9 +297,7 @@ def _linear_params(record, problem, reported, cov, static, nominal, modulus_tole
     dcov = np.asarray(jac) @ cov @ np.asarray(jac).T
     if pin == "material" and static is None:  # ρa and C scale with the assumed modulus
         dcov = dcov + modulus_covariance(names, np.asarray(values), modulus_tolerance)
-    std = np.sqrt(np.maximum(np.diag(dcov), 0.0))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        corr = dcov / np.outer(std, std)
+    std = reported_std(dcov)
     pinned = {"geometry": "rho_a", "material": "EI"}[pin]
     params = {}
     for i, name in enumerate(names):
@@ -356,5 +356,4 @@ def _linear_params(record, problem, reported, cov, static, nominal, modulus_tole
             if static is None
             else ""
         )
-    correlations = {"names": list(names), "matrix": np.round(np.nan_to_num(corr), 6).tolist()}
-    return params, correlations, fixed, note
+    return params, correlation_table(names, dcov, std), fixed, note

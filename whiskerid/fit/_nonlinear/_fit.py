@@ -44,10 +44,12 @@ from .._linear import GTOL, unflatten_numpy
 from .._numerics import lsq
 from .._result import (
     Calibration,
+    correlation_table,
     fit_diagnostics,
     fit_status,
     poor_fit_warnings,
     recording_blocks,
+    reported_std,
 )
 from ._free_modes import FreeModesProblem, free_higher_modes, free_modes_table
 from ._friction import friction_waveform as friction_waveform
@@ -294,8 +296,8 @@ def _nonlinear_params(problem, flat, cov, cov_white, grid, linear):
     values, jac = nonlinear_reported_with_jacobian(problem, flat, grid)
     names = _reported_names(problem, flat, grid)
     dcov = jac @ cov @ jac.T
-    std = np.sqrt(np.maximum(np.diag(dcov), 0.0))
-    std_white = np.sqrt(np.maximum(np.diag(jac @ cov_white @ jac.T), 0.0))
+    std = reported_std(dcov)
+    std_white = reported_std(jac @ cov_white @ jac.T)
     params, bb = {}, {"f_hz": [], "f_std": [], "zeta": [], "zeta_std": []}
     keep = []
     for i, name in enumerate(names):
@@ -309,13 +311,7 @@ def _nonlinear_params(problem, flat, cov, cov_white, grid, linear):
         params[name] = {"value": float(values[i]), "std": float(std[i]), "source": source,
                         "std_white": float(std_white[i])}  # fmt: skip
     bb["amplitude_m"] = [float(a) for a in grid]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        sub = dcov[np.ix_(keep, keep)]
-        corr = sub / np.outer(std[keep], std[keep])
-    correlations = {
-        "names": [names[i] for i in keep],
-        "matrix": np.round(np.nan_to_num(corr), 6).tolist(),
-    }
+    correlations = correlation_table([names[i] for i in keep], dcov[np.ix_(keep, keep)], std[keep])
     return params, correlations, bb
 
 

@@ -274,3 +274,16 @@ def record_with_fit(record, cal: Calibration, pin, static, obs, problem):
     extra["fit"] = fit
     desc = record.description
     return record.replace(structure=structure, zeta=zeta, extra=extra, description=desc)
+
+
+def reported_std(dcov: np.ndarray) -> np.ndarray:
+    """The 1σ of reported quantities from their covariance (a rounding-negative variance is 0)."""
+    return np.sqrt(np.maximum(np.diag(dcov), 0.0))
+
+
+def correlation_table(names, dcov: np.ndarray, std: np.ndarray) -> dict:
+    """A calibration's ``correlations``: the names and the correlation matrix of the reported
+    quantities (covariance ``dcov``, 1σ ``std``), to 6 digits; shared by every fit."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = dcov / np.outer(std, std)
+    return {"names": list(names), "matrix": np.round(np.nan_to_num(corr), 6).tolist()}
