@@ -40,7 +40,7 @@ def listen(event, d, **k):
 jax.monitoring.register_event_duration_secs_listener(listen)
 t = {"start": T0}
 import whiskerid.fit, whiskerid.model
-from whiskerid.fit import _aot
+from whiskerid.fit._numerics import _aot as _aot
 t["imports"] = time.perf_counter(); C["imports"] = time.process_time()
 record = whiskerid.model.load_record(sys.argv[2])
 obs = whiskerid.fit.observations_from_file(sys.argv[1], record)

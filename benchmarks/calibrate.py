@@ -14,7 +14,8 @@ parameters: log f_d, logit ζ, a, b, offset), on
 * 1000 windows (1 s at 200 Hz, random f_d 20–80 Hz and ζ 0.01–0.06, SNR 30 dB) fitted by
   :func:`whiskerid.fit_windows`' solver (variable-projection Levenberg–Marquardt, all windows
   in one compiled ``vmap``-ed loop), by one ``vmap``-ed optimistix call
-  (``whiskerid.fit._lsq.batch_least_squares``) and by a SciPy loop, from the same start values.
+  (``whiskerid.fit._numerics._lsq.batch_least_squares``) and by a SciPy loop, from the same
+  start values.
 
 And with ``--cli``, the command line as a user runs it (module ``_calibrate_cli``): ``whiskerid
 calibrate`` of a 5 s pluck at 200 Hz (1000 samples) with an empty compile cache (cold) and
@@ -38,13 +39,13 @@ import numpy as np
 
 import whiskerid as wi
 from whiskerid.fit import ZETA_MAX
-from whiskerid.fit import _lsq as _lsq
-from whiskerid.fit._windows import (
+from whiskerid.fit._linear._windows import (
     _vp_fit,
     _window_candidates,
     window_model_residuals,
     window_start,
 )
+from whiskerid.fit._numerics import _lsq as _lsq
 
 TOL = 1e-8  # relative tolerance on parameters and cost, for all three solvers
 

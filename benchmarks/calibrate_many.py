@@ -38,7 +38,7 @@ import jax
 import numpy as np
 
 import whiskerid as wi
-from whiskerid.fit import _aot
+from whiskerid.fit._numerics import _aot as _aot
 from whiskerid.model import CoilSpring
 
 _COMPILES: list[float] = []

@@ -44,9 +44,9 @@ from scipy.integrate import solve_ivp
 from scipy.stats import chi2
 
 from whiskerid.fit import Observation, calibrate, nominal_gain, observations_from_recording
-from whiskerid.fit._amplitude import P_FALSE
-from whiskerid.fit._nl_select import term_z
+from whiskerid.fit._choice._amplitude import P_FALSE
 from whiskerid.fit._nonlinear import calibrate_nonlinear, tip_per_sensor
+from whiskerid.fit._nonlinear._select import term_z
 from whiskerid.model import paper_record, simulate_pluck
 
 #: (frequency rise at release, ζ_quadratic/ζ₀ at release, ζ_coulomb/ζ₀ at release)

@@ -3,7 +3,7 @@ informed amplitude and in the middle of the range, beside the parametric fit's.
 
 The plucks are ``benchmarks/calibrate_nonlinear.py``'s (SciPy ``solve_ivp``, one mode with
 cubic stiffening and velocity-squared damping, volts, 40 dB). The log-polynomial backbone
-(:func:`whiskerid.fit._nl_logpoly.calibrate_logpoly_backbone`, knots chosen by its criterion)
+(:func:`whiskerid.fit._nonlinear._select.calibrate_logpoly_backbone`, knots chosen by its criterion)
 identifies ``f(a)`` and ``ζ(a)`` over the recorded amplitudes, so its truth is the true
 backbone at the same amplitude: the harmonic-balance ``f(a) = f₀(1 + 3γa²/8)`` and, because
 its flow is ``ȧ = −ζ(a)ω(a)a`` where the parametric one's is ``ȧ = −ζ_p(a)ω₀a``,
@@ -27,8 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from calibrate_nonlinear import KINDS, nonlinear_case, pull
 
 from whiskerid.fit import calibrate
-from whiskerid.fit._nl_logpoly import backbone_at, calibrate_logpoly_backbone
-from whiskerid.fit._nonlinear import calibrate_nonlinear
+from whiskerid.fit._nonlinear import backbone_at, calibrate_logpoly_backbone, calibrate_nonlinear
 from whiskerid.model import NonlinearMode
 
 

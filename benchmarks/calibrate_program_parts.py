@@ -1,6 +1,6 @@
 """Benchmark: where a warm calibration's compiled program spends its time, part by part.
 
-The program of ``wi.calibrate`` (module ``whiskerid.fit._core``: start search, solver,
+The program of ``wi.calibrate`` (module ``whiskerid.fit._linear._program``: start search, solver,
 covariance and outputs) on the plucks of ``benchmarks/calibrate_many.py`` (coil whiskers,
 10 s at 200 Hz read by the ADS1115, record 30 % off in f_1), and its parts compiled apart:
 the start search alone (16 profiles of the model), the solver from that start, and the
@@ -26,10 +26,10 @@ import jax
 
 import whiskerid as wi
 from whiskerid.fit import FitProblem
-from whiskerid.fit._core import _padded, fit_core, solve
-from whiskerid.fit._host_whisker import nominal_whisker
-from whiskerid.fit._start import start_from_grid, start_grid
-from whiskerid.fit._threads import one_blas_thread
+from whiskerid.fit._linear._host_whisker import nominal_whisker
+from whiskerid.fit._linear._program import fit_core, padded_problem, solve_masked
+from whiskerid.fit._linear._start import start_from_grid, start_grid
+from whiskerid.fit._numerics._threads import one_blas_thread
 
 sys.path.insert(0, str(Path(__file__).parent))
 from calibrate_many import _nominal, _whiskers
@@ -47,7 +47,7 @@ def _inputs(n: int):
         nominal = nominal_whisker(record, 2)
         problem = FitProblem.from_observations(record, [obs], n_modes=2, pin="geometry",
                                                nominal=nominal)  # fmt: skip
-        padded, masks = _padded(problem)
+        padded, masks = padded_problem(problem)
         out.append((padded, masks, start_grid(problem, [obs], nominal)))
     return out
 
@@ -71,7 +71,7 @@ def main() -> None:
     lm = {"solver": "levenberg-marquardt", "max_steps": 400}
     program = jax.jit(functools.partial(fit_core, **lm))
     search = jax.jit(lambda p, m, g: p.flatten(start_from_grid(p, g, m, coefficients=False)))
-    solver = jax.jit(lambda p, m, flat0: solve(p, m, flat0, **lm))
+    solver = jax.jit(lambda p, m, flat0: solve_masked(p, m, flat0, **lm))
     with one_blas_thread(jax_lapack=True):
         starts = [(p, m, search(p, m, g)) for p, m, g in cases]
         solved = [solver(*a) for a in starts]

@@ -99,8 +99,8 @@ def child(source: str, n: int, warm: bool, peer: bool, data: Path) -> dict:
     """One case, measured in this process (run with ``--child``)."""
     import whiskerid as wi
     from whiskerid.fit import find_decays
-    from whiskerid.fit._checks import bartlett_meat, hac_lag
-    from whiskerid.fit._problem import residuals_and_jacobian
+    from whiskerid.fit._checks._checks import bartlett_meat, hac_lag
+    from whiskerid.fit._linear._problem import residuals_and_jacobian
 
     sys.path.insert(0, str(ROOT / "examples"))
     from calibrate_cantilever import beam_record

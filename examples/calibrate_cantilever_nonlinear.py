@@ -37,8 +37,8 @@ from calibrate_cantilever import ROOT, beam_record, observation
 
 import whiskerid as wi
 from whiskerid.fit import calibrate_nonlinear
-from whiskerid.fit._nl_free_modes import _line_near
-from whiskerid.fit._spectral_floor import spectral_whiteness
+from whiskerid.fit._checks._spectral_floor import spectral_whiteness
+from whiskerid.fit._nonlinear._free_modes import _line_near
 from whiskerid.model._nonlinear import COEFFICIENTS
 
 
@@ -80,7 +80,7 @@ def residual_spectrum(
 
 def noise_ratio(cal, o, lines_hz) -> dict:
     """The residual's PSD against the sensor noise's near f1 and near the second mode's
-    line (:func:`whiskerid.fit._spectral_floor.spectral_whiteness`): ratio 1 is white."""
+    line (:func:`whiskerid.fit._checks._spectral_floor.spectral_whiteness`): ratio 1 is white."""
     s = spectral_whiteness(o.t, o.y - cal.curves[0][2], lines_hz, quiet=o.quiet)
     return {"reference": s["reference"], "white": s["white"],
             "bands": [{k: b[k] for k in ("f_hz", "ratio", "ratio_std", "p_value", "white")}

@@ -9,7 +9,7 @@ compiled program serves them all) is fitted with
 * ``parametric``: the nonlinear model with κ, velocity² and cubic terms;
 * ``spline`` (JSON key): ``f(a)``, ``ζ(a)`` as polynomials in ``ln a`` through ``K`` knots
   (``calibrate_nonlinear(..., knots=K)``), ``K`` chosen by the information criterion of
-  :func:`whiskerid.fit._nl_logpoly.calibrate_logpoly_backbone`;
+  :func:`whiskerid.fit._nonlinear._select.calibrate_logpoly_backbone`;
 
 at 50 cm both with the free second mode (``free_modes=True``). Per recording it prints the
 residual's PSD over the sensor noise's near f1 and near the second mode's line (1 is white),
@@ -36,8 +36,8 @@ from calibrate_cantilever_nonlinear import noise_ratio, repeats, second_mode_hz,
 
 import whiskerid as wi
 from whiskerid.fit import calibrate_nonlinear
-from whiskerid.fit._nl_free_modes import _line_near
-from whiskerid.fit._nl_logpoly import backbone_at, calibrate_logpoly_backbone, criterion
+from whiskerid.fit._nonlinear import backbone_at, calibrate_logpoly_backbone, criterion
+from whiskerid.fit._nonlinear._free_modes import _line_near
 
 STRIDE = {30: 16, 50: 32}
 

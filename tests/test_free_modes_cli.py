@@ -9,7 +9,7 @@ import pytest
 
 import whiskerid as wi
 from whiskerid.cli import main
-from whiskerid.fit._nl_free_modes import free_modes_table
+from whiskerid.fit._nonlinear._free_modes import free_modes_table
 from whiskerid.model import nonlinear_coefficients
 
 PAPER = "fits/paper-whisker.toml"

@@ -66,7 +66,7 @@ def test_sincos_equals_sin_and_cos(span):
     """The vectorisable sin/cos (posterior's decay columns) vs NumPy to rounding, grad exact."""
     import jax
 
-    from whiskerid.fit._trig import sincos
+    from whiskerid.fit._numerics._trig import sincos
 
     rng = np.random.default_rng(0)
     x = np.concatenate([rng.uniform(-span, span, 20000), np.arange(-8, 9) * np.pi / 4, [0.0]])

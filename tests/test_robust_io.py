@@ -12,7 +12,7 @@ import pytest
 
 import whiskerid as wi
 from whiskerid.cli._main import json_safe, main
-from whiskerid.fit._calibrate import _poor_fit_warnings
+from whiskerid.fit._result import poor_fit_warnings
 from whiskerid.io import TornRecordingWarning
 from whiskerid.terrain import RunSpec, dataset_paths, speed_tag, synthesize_dataset
 
@@ -380,9 +380,9 @@ def test_stream_refuses_bad_numbers(tmp_path, capsys, argv, message):
 # --------------------------------------------------------------------------- poor fits
 def test_poor_fit_warning_names_the_recording_below_3_db():
     per_rec = [{"name": "good.csv", "snr_db": 18.1}, {"name": "ms.csv", "snr_db": 0.015}]
-    (warning,) = _poor_fit_warnings(per_rec)
+    (warning,) = poor_fit_warnings(per_rec)
     assert "ms.csv" in warning and "time units" in warning
-    assert _poor_fit_warnings([{"name": "x", "snr_db": math.nan}])
+    assert poor_fit_warnings([{"name": "x", "snr_db": math.nan}])
 
 
 def test_calibrating_a_recording_timed_in_ms_is_refused(tmp_path, capsys):

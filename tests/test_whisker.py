@@ -153,7 +153,7 @@ def test_missing_and_garbled_files(tmp_path):
 def test_the_calibration_reads_the_whisker_the_model_makes(record, n_modes):
     """The calibration's host copy of the record's whisker (its set-up, report and checks)
     holds what :meth:`WhiskerRecord.whisker` gives, to rounding."""
-    from whiskerid.fit._host_whisker import nominal_whisker
+    from whiskerid.fit._linear._host_whisker import nominal_whisker
 
     host, w = nominal_whisker(record, n_modes), record.whisker().with_modes(n_modes)
     for name in ("length_m", "EI", "rho_a", "zeta", "tip_mass_kg", "sensor_x_m", "mu", "beta",

@@ -41,10 +41,31 @@ import numpy as np
 from jaxtyping import Array
 
 from ..model import CoilSpring, UniformBeam, Whisker, WhiskerRecord, cantilever_roots
-from . import _lsq as _lsq
-from ._observation import CalibrationError, Observation
-from ._problem import ZETA_MAX, FitProblem, recording_design, solve
-from ._start import start_values
+from ._checks import LAG1_MAX, check_fit, decay_sampling_rates_hz, hac_covariance, no_smaller_than
+from ._data import CalibrationError, Observation
+from ._linear import (
+    GTOL,
+    ZETA_MAX,
+    FitProblem,
+    recording_design,
+    reported_names,
+    reported_with_jacobian,
+    residuals_and_jacobian,
+    solve,
+    start_values,
+)
+from ._numerics import gradient_cosine_from, lsq, residual_variance, scaled_inverse_gram
+from ._result import (
+    Calibration,
+    correlation_table,
+    fit_diagnostics,
+    fit_status,
+    poor_fit_warnings,
+    record_with_fit,
+    recording_blocks,
+    recording_diagnostics,
+    reported_std,
+)
 
 #: A fit whose ρa (so EI and C) has a relative 1σ above this is flagged: the mass is too
 #: small for the data's precision.
@@ -116,7 +137,7 @@ class AddedMassProblem(FitProblem):
         """The whisker of configuration ``k`` (its tip mass and ζ)."""
         kappa = jnp.exp(params["log_kappa"])
         rho_a = jnp.exp(params["log_rho_a"])
-        zeta = _lsq.to_interval(params["zeta_u"][k], 0.0, ZETA_MAX)
+        zeta = lsq.to_interval(params["zeta_u"][k], 0.0, ZETA_MAX)
         return Whisker(
             length_m=self.length_m,
             EI=kappa * rho_a,
@@ -396,11 +417,6 @@ def calibrate_added_mass(
         A :class:`whiskerid.fit.Calibration` whose ``params`` hold EI, ρa and C (or E) as
         fitted, and per loaded configuration its f_1, ζ, mass and μ.
     """
-    from . import _calibrate as cal_mod
-    from ._checks import LAG1_MAX, check_fit, decay_rates, hac_covariance, no_smaller_than
-    from ._lsq import gradient_cosine_from, residual_variance, scaled_inverse_gram
-    from ._problem import reported_names, reported_with_jacobian, residuals_and_jacobian
-
     obs = list(observations)
     problem = added_mass_problem(record, obs, masses, n_modes=n_modes, zeta_per_mode=zeta_per_mode)
     if start is None:
@@ -417,10 +433,10 @@ def calibrate_added_mass(
     s2 = float(residual_variance(resid_w, res.value.size))
     cov = s2 * bread
     gcos = float(gradient_cosine_from(jac, resid_w))
-    ok = (bool(res.ok) or gcos < cal_mod.GTOL) and bool(np.all(np.isfinite(np.diag(cov))))
+    ok = (bool(res.ok) or gcos < GTOL) and bool(np.all(np.isfinite(np.diag(cov))))
     status = "ok" if ok else ("non-finite" if not np.isfinite(float(res.cost)) else "not converged")
     optimum = problem.unflatten(res.value)
-    per_rec, curves, resid = cal_mod._per_recording(
+    per_rec, curves, resid = recording_diagnostics(
         problem, optimum, obs, _models(problem, optimum), np.asarray(problem.residuals(optimum))
     )
     for r, k in zip(per_rec, problem.config_of, strict=True):
@@ -428,7 +444,7 @@ def calibrate_added_mass(
         r["configuration"] = int(k)
     uncertainty = "white noise: s^2 (J^T J)^-1, masses' 1-sigma included"
     if ok and max(r["lag1_autocorr"] for r in per_rec) > LAG1_MAX:
-        hac, lag = hac_covariance(cal_mod._blocks(jac, resid_w, obs), bread)
+        hac, lag = hac_covariance(recording_blocks(jac, resid_w, obs), bread)
         cov = no_smaller_than(hac, cov)
         uncertainty = (
             f"HAC (Newey-West, Bartlett weights to lag {lag}; never below the white-noise "
@@ -437,9 +453,7 @@ def calibrate_added_mass(
     names = reported_names(problem)
     values, rjac = (np.asarray(a) for a in reported_with_jacobian(problem, res.value))
     dcov = rjac @ cov @ rjac.T
-    std = np.sqrt(np.maximum(np.diag(dcov), 0.0))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        corr = dcov / np.outer(std, std)
+    std = reported_std(dcov)
     params = {}
     for i, name in enumerate(names):
         source = "fit"
@@ -455,23 +469,24 @@ def calibrate_added_mass(
     )
     note = added_mass_note(problem, record, masses_text)
     fixed = {"length_m": float(record.structure.length_m), "tip_mass_kg": float(record.tip_mass_kg)}
-    diagnostics = cal_mod.fit_diagnostics(per_rec, obs, res, resid, s2=s2, gcos=gcos,
+    diagnostics = fit_diagnostics(per_rec, obs, res, resid, s2=s2, gcos=gcos,
                                           uncertainty=uncertainty)  # fmt: skip
-    warnings = cal_mod._poor_fit_warnings(per_rec)
+    warnings = poor_fit_warnings(per_rec)
     checks = {}
     if ok:
         nominal = record.whisker().with_modes(n_modes)
+        rates = decay_sampling_rates_hz(obs)
         checks = check_fit(params, per_rec, float(nominal.natural_frequencies_hz[0]),
-                           decay_rates_hz=decay_rates(obs), f1_expected_hz=f1_start_hz)  # fmt: skip
+                           decay_rates_hz=rates, f1_expected_hz=f1_start_hz)  # fmt: skip
         small = added_mass_check(params, problem, record)
         if small is not None:
             checks["added-mass-small"] = small
-    status, warnings = cal_mod.fit_status(status, ok, warnings, checks)
-    out = cal_mod.Calibration(
+    status, warnings = fit_status(status, ok, warnings, checks)
+    out = Calibration(
         status=status,
         ok=ok,
         params=params,
-        correlations={"names": list(names), "matrix": np.round(np.nan_to_num(corr), 6).tolist()},
+        correlations=correlation_table(names, dcov, std),
         fixed=fixed,
         note=note,
         diagnostics=diagnostics,
@@ -485,7 +500,7 @@ def calibrate_added_mass(
         optimum=optimum,
         covariance=cov,
     )
-    out.record = _updated_record(record, out, obs, problem)
+    out.record = _record_with_added_mass_fit(record, out, obs, problem)
     return out
 
 
@@ -502,12 +517,10 @@ def _models(problem: AddedMassProblem, optimum) -> list[tuple[np.ndarray, np.nda
     return out
 
 
-def _updated_record(record, cal, obs, problem: AddedMassProblem):
+def _record_with_added_mass_fit(record, cal, obs, problem: AddedMassProblem):
     """The record with the fit written in (EI and ρa into its structure) and a ``[fit]``
     table that lists the configurations."""
-    from ._calibrate import _updated_record as updated
-
-    new = updated(record, cal, "added mass", None, obs, problem)
+    new = record_with_fit(record, cal, "added mass", None, obs, problem)
     if cal.ok:
         p = cal.params
         new = new.replace(

@@ -30,14 +30,13 @@ import numpy as np
 
 from .._choices import PINS
 from ..model import WhiskerRecord
-from . import _lsq as _lsq
-from ._calibrate import _poor_fit_warnings as poor_fit_warnings
-from ._calibrate import fit_status
-from ._checks import check_fit, decay_rates, lag1, residual_peak
-from ._core import solve, solve_status
-from ._observation import CalibrationError, Observation
-from ._problem import FitProblem, _flat_residuals, reported_names
-from ._start import start_values
+from ._checks import check_fit, lag1, residual_peak
+from ._checks import decay_sampling_rates_hz as decay_rates
+from ._data import CalibrationError, Observation
+from ._linear import FitProblem, flat_residuals, reported_names, solve_status, start_values
+from ._linear import solve_masked as solve
+from ._numerics import lsq
+from ._result import fit_status, poor_fit_warnings
 
 #: Lanes of one batched program (fits of one shape solved together).
 BATCH_LANES = 16
@@ -117,8 +116,8 @@ def calibrate_each(
     """
     if pin not in PINS:
         raise CalibrationError(f"pin must be one of {PINS}, not {pin!r}")
-    if solver not in _lsq.SOLVERS:
-        raise CalibrationError(f"solver must be one of {', '.join(_lsq.SOLVERS)}; got {solver!r}")
+    if solver not in lsq.SOLVERS:
+        raise CalibrationError(f"solver must be one of {', '.join(lsq.SOLVERS)}; got {solver!r}")
     pin = "geometry" if pin == "auto" else pin
     out: list[PluckFit | None] = [None] * len(items)
     groups: dict[tuple, list] = {}
@@ -159,8 +158,8 @@ def _fit_batch(problems, flat0, solver, max_steps):
         # calibrate's own solve (same solver, tolerances and tests): no padding rows
         masks = [jnp.ones(r.t.shape[0]) for r in problem.recordings]
         value, ok, steps = solve(problem, masks, y0, solver=solver, max_steps=max_steps)
-        resid, jac = _flat_residuals(value, problem), jax.jacfwd(_flat_residuals)(value, problem)
-        cov = _lsq.residual_variance(resid, value.size) * _lsq.scaled_inverse_gram(jac)
+        resid, jac = flat_residuals(value, problem), jax.jacfwd(flat_residuals)(value, problem)
+        cov = lsq.residual_variance(resid, value.size) * lsq.scaled_inverse_gram(jac)
 
         def reported(flat):
             return jnp.stack(list(problem.reported(problem.unflatten(flat)).values()))
@@ -172,7 +171,7 @@ def _fit_batch(problems, flat0, solver, max_steps):
             "ok": ok,
             "steps": steps,
             "cost": 0.5 * jnp.sum(resid**2),
-            "gcos": _lsq.gradient_cosine_from(jac, resid),
+            "gcos": lsq.gradient_cosine_from(jac, resid),
             "cov_diag": jnp.diag(cov),
             "reported": reported(value),
             "reported_var": jnp.einsum("ij,jk,ik->i", rjac, cov, rjac),

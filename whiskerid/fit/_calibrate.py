@@ -17,18 +17,18 @@ uncertainty propagated through the Jacobian:
 A tip mass makes the mode-frequency ratios depend on ``μ = M_t/(ρa l)``, so on ρa, but only
 weakly; μ is taken from the record unless a static test fixes ρa.
 
-The model (:class:`whiskerid.fit.FitProblem`, module ``_problem``) is linear in most
-nuisances, ``y = D(θ) c + g(θ)``. Start values come from the data (module ``_start``: a
+The model (:class:`whiskerid.fit.FitProblem`, module ``_linear._problem``) is linear in most
+nuisances, ``y = D(θ) c + g(θ)``. Start values come from the data (module ``_linear._start``: a
 grid over ``(κ, ζ)`` seeded by the spectral peaks and the envelope's logarithmic decay, with
 the linear coefficients solved exactly at every grid point); the best point starts a
-Levenberg–Marquardt fit by variable projection (module ``_varpro``: the linear coefficients
+Levenberg–Marquardt fit by variable projection (module ``_linear._varpro``: the linear coefficients
 solved at every point; optimistix's dogleg or Gauss–Newton over all parameters on request),
 with a status per fit.
 The covariance is ``s²(JᵀJ)⁻¹`` at the optimum (through the SVD of the column-scaled
 Jacobian, see :func:`whiskerid.fit.covariance`); with several recordings (or a static test)
 each block is weighted by its own residual scale from a first pass. When the residuals are
 correlated a HAC (Newey–West) sandwich replaces it, and a converged fit must pass the checks
-of module ``_checks`` (residuals, bounds, plausibility, precision) to be called ``ok``.
+of sub-package ``_checks`` (residuals, bounds, plausibility, precision) to be called ``ok``.
 
 jaxopt is not used as a second backend: version 0.8.5 warns on import that it is no longer
 maintained (which fails a test run with ``filterwarnings = error``) and its
@@ -38,111 +38,46 @@ compared in ``benchmarks/calibrate.py`` instead.
 
 """
 
-import datetime
-from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any
-
 import numpy as np
 
 from .._choices import PINS, SOLVERS
-from .._version import __version__
-from ..io import sha256_of
-from ..model import UniformBeam, WhiskerRecord
-from ._aot import with_compile_cache
+from ..model import WhiskerRecord
+from ._added_mass import calibrate_added_mass
 from ._checks import (
     LAG1_MAX,
     check_fit,
     data_side,
-    residual_peak,
     robust_covariance,
 )
-from ._checks import lag1 as lag1_autocorr
 from ._checks import moments as recording_moments
-from ._core import GTOL as GTOL
-from ._core import fit_problem, solve_status
-from ._host_whisker import nominal_whisker
-from ._modulus import MODULUS_TOLERANCE, check_tolerance, modulus_covariance
-from ._observation import CalibrationError, Observation, StaticTest
-from ._problem import FitProblem, reported_names
-from ._threads import single_blas_thread
+from ._choice import choose_model
+from ._data import CalibrationError, Observation, StaticTest
+from ._linear import GTOL as GTOL
+from ._linear import (
+    MODULUS_TOLERANCE,
+    FitProblem,
+    check_tolerance,
+    fit_problem,
+    modulus_covariance,
+    nominal_whisker,
+    reported_names,
+    solve_status,
+)
+from ._numerics import single_blas_thread, with_compile_cache
+from ._result import (
+    Calibration,
+    correlation_table,
+    fit_diagnostics,
+    fit_status,
+    poor_fit_warnings,
+    record_with_fit,
+    recording_blocks,
+    recording_diagnostics,
+    reported_std,
+)
 
 #: Samples larger than this (in any units) are refused: their squares and sums overflow.
 MAX_SAMPLE = 1e100
-
-
-# --------------------------------------------------------------------------- results
-@dataclass
-class Calibration:
-    """Outcome of :func:`calibrate`.
-
-    Attributes:
-        status: ``"ok"`` or why not: ``"not converged"``, ``"non-finite"``, ``"poor fit"``
-            (the model explains little of a recording) or ``"check"`` (converged, but a
-            check in ``checks`` failed: correlated residuals, a line left in the residuals,
-            ζ at a bound or implausible, f_1 far from the record's, or imprecise values).
-        ok: Whether the solver reported success and the covariance is finite.
-        params: Reported parameters, name → ``{"value", "std", "source"}`` (``source`` is
-            ``"fit"`` or ``"derived"``, the latter with the pin it used).
-        correlations: ``{"names": [...], "matrix": [[...]]}`` of the reported parameters.
-        fixed: Values taken from the record (prior, geometry, material), name → value.
-        note: What the data determine and what came from elsewhere (identifiability).
-        diagnostics: RMS residual, reduced χ², residual lag-1 autocorrelation, samples, steps.
-        per_recording: Nuisances and residual diagnostics per recording.
-        record: The input record with the fitted values written in, and a ``[fit]`` table.
-        solver: Solver name.
-        curves: Per recording ``(t, y, model)`` in observed units (for plots).
-        warnings: What the user should check (one sentence each), e.g. a poor fit.
-        checks: The failed checks of a converged fit, name → sentence (see
-            :mod:`whiskerid.fit._checks`); empty for ``ok``.
-        problem: The fitted :class:`whiskerid.fit.FitProblem` (each recording weighted by
-            its own residual scale).
-        optimum: The parameter pytree at the optimum (``problem.flatten(optimum)`` is the
-            vector ``covariance`` refers to).
-        covariance: ``s²(JᵀJ)⁻¹`` of the flat parameters at the optimum.
-    """
-
-    status: str
-    ok: bool
-    params: dict[str, dict]
-    correlations: dict[str, Any]
-    fixed: dict[str, float]
-    note: str
-    diagnostics: dict[str, Any]
-    per_recording: list[dict]
-    record: WhiskerRecord
-    solver: str
-    curves: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = field(
-        repr=False, default_factory=list
-    )
-    warnings: list[str] = field(default_factory=list)
-    checks: dict[str, str] = field(default_factory=dict)
-    problem: FitProblem | None = field(default=None, repr=False)
-    optimum: Any = field(default=None, repr=False)
-    covariance: np.ndarray | None = field(default=None, repr=False)
-
-    def report(self) -> str:
-        """The console report (``whiskerid calibrate``): see :func:`whiskerid.fit.fit_report`."""
-        from ._report import fit_report
-
-        return fit_report(self)
-
-    def to_json(self) -> dict:
-        """The JSON summary (``whiskerid calibrate --json``)."""
-        return {
-            "status": self.status,
-            "ok": self.ok,
-            "solver": self.solver,
-            "params": {k: {"value": v["value"], "std": v["std"]} for k, v in self.params.items()},
-            "sources": {k: v["source"] for k, v in self.params.items()},
-            "fixed": self.fixed,
-            "identifiability": self.note,
-            "correlations": self.correlations,
-            "diagnostics": self.diagnostics,
-            "recordings": self.per_recording,
-            "warnings": self.warnings,
-            "checks": self.checks,
-        }
 
 
 # --------------------------------------------------------------------------- calibrate
@@ -192,12 +127,12 @@ def calibrate(
             :func:`whiskerid.fit.calibrate_added_mass`); ``pin`` and ``static`` are then not
             used.
         modulus_tolerance: Relative 1σ of the record's modulus under ``pin="material"``,
-            carried into ρa's and C's 1σ (default 20 %, see ``whiskerid.fit._modulus``).
+            carried into ρa's and C's 1σ (default 20 %, see ``whiskerid.fit._linear._modulus``).
         model: ``linear`` (default; free decays are also tested for amplitude-dependent
             frequency and damping, ``check`` when found), ``nonlinear`` (cubic stiffness and
             amplitude-dependent damping of mode 1, free decays only: a
             :class:`whiskerid.fit.NonlinearCalibration`) or ``auto`` (nonlinear when the
-            test rejects the linear fit). See :mod:`whiskerid.fit._amplitude`.
+            test rejects the linear fit). See :mod:`whiskerid.fit._choice._amplitude`.
         nl_terms: The nonlinear model's terms (default all: ``cubic``, ``quadratic``,
             ``coulomb``).
         free_modes: The nonlinear model's modes 2… with their own frequency and damping,
@@ -213,51 +148,22 @@ def calibrate(
     if not obs:
         raise CalibrationError("no recordings to calibrate")
     modulus_tolerance = check_tolerance(modulus_tolerance)
-    if model not in ("linear", "nonlinear", "auto"):
-        raise CalibrationError(f"model must be linear, nonlinear or auto, not {model!r}")
-    if model == "nonlinear" and (static is not None or any(o.excitation != "decay" for o in obs)):
-        raise CalibrationError(
-            "the nonlinear model fits free decays only (no sine, base motion or static test); "
-            "fit those with --model linear"
-        )
-    if free_modes:
-        _check_free_modes(model, n_modes, static, obs)
-    if added_mass is not None and model != "linear":
-        raise CalibrationError(
-            "the added-mass method fits the linear model; leave out --model (or give linear)"
-        )
+    _check_model(model, obs, static, free_modes, n_modes, added_mass)
     if added_mass is not None:
         if static is not None:
             raise CalibrationError("give a static test or added masses, not both")
-        from ._added_mass import calibrate_added_mass
-
         return calibrate_added_mass(record, obs, list(added_mass), n_modes=n_modes,
                                     zeta_per_mode=zeta_per_mode, solver=solver,
                                     max_steps=max_steps, f1_start_hz=f1_start_hz,
                                     start=start)  # fmt: skip
-    if pin not in PINS:
-        raise CalibrationError(f"pin must be one of {PINS}, not {pin!r}")
-    if not 1 <= n_modes <= 10:
-        raise CalibrationError(f"n_modes = {n_modes} must be between 1 and 10")
-    for o in obs:  # sums of squares of such samples overflow: no fit can be computed
-        if float(np.max(np.abs(o.y))) > MAX_SAMPLE:
-            raise CalibrationError(
-                f"{o.name}: the samples reach {float(np.max(np.abs(o.y))):.3g}, too large to "
-                "fit in any units (their squares overflow): scale the signal to the "
-                "observable's units (--scale)"
-            )
-    if f1_start_hz is not None and not (np.isfinite(f1_start_hz) and f1_start_hz > 0):
-        raise CalibrationError(
-            f"the f1 to start from ({f1_start_hz!r} Hz, --f1-start) must be a positive "
-            "frequency: give the frequency in Hz that the whisker rings at, or leave it out"
-        )
+    _check_linear(obs, pin, n_modes, f1_start_hz)
     pin = "geometry" if pin == "auto" else pin
     nominal = nominal_whisker(record, n_modes)
     problem = FitProblem.from_observations(
         record, obs, static=static, n_modes=n_modes, zeta_per_mode=zeta_per_mode, pin=pin,
         nominal=nominal,
     )  # fmt: skip
-    # One compiled program (module _core): the start grid over (κ, ζ) with the linear
+    # One compiled program (module _linear._program): the start grid over (κ, ζ) with the linear
     # coefficients solved exactly, the solve, each block (recording, static test) weighted by
     # its own residual scale (s² ≈ 1, a reduced χ²), and one Jacobian at the optimum for the
     # covariance, the gradient test and the HAC below.
@@ -265,8 +171,8 @@ def calibrate(
         raise CalibrationError(f"solver must be one of {', '.join(SOLVERS)}; got {solver!r}")
     res = fit_problem(problem, obs, nominal, solver=solver, max_steps=max_steps,
                       f1_start_hz=f1_start_hz, start=start,
-                      meanwhile=lambda: (data_side(obs), recording_moments(obs)))  # fmt: skip
-    (peak_refs, rates), moments = res.meanwhile
+                      host_work=lambda: (data_side(obs), recording_moments(obs)))  # fmt: skip
+    (peak_refs, rates), moments = res.host_work_result
     problem, resid_w, jac, bread, s2 = res.problem, res.resid, res.jac, res.bread, res.s2
     cov = s2 * bread
     # The solver's own test (steps below rtol 1e-10 of every parameter) can stall at
@@ -276,17 +182,21 @@ def calibrate(
     status, ok = solve_status(res.ok, gcos, np.diag(cov), res.cost)
 
     optimum = res.optimum
-    per_rec, curves, resid = _per_recording(problem, optimum, obs, res.models, resid_w,
+    per_rec, curves, resid = recording_diagnostics(problem, optimum, obs, res.models, resid_w,
                                             peak_refs, moments)  # fmt: skip
     uncertainty = "white noise: s^2 (J^T J)^-1"
     cov_white = cov
     if ok:  # a sandwich where the residuals are correlated or their spread changes
         correlated = max(r["lag1_autocorr"] for r in per_rec) > LAG1_MAX
-        cov, uncertainty = robust_covariance(_blocks(jac, resid_w, obs, correlated), bread, cov)
+        cov, uncertainty = robust_covariance(
+            recording_blocks(jac, resid_w, obs, correlated), bread, cov
+        )
     tol = modulus_tolerance
-    params, corr, fixed, note = _report(record, problem, res.reported, cov, static, nominal, tol)
+    params, corr, fixed, note = _linear_params(
+        record, problem, res.reported, cov, static, nominal, tol
+    )
     if cov is not cov_white:
-        white, *_ = _report(record, problem, res.reported, cov_white, static, nominal, tol)
+        white, *_ = _linear_params(record, problem, res.reported, cov_white, static, nominal, tol)
         for k in params:
             params[k]["std_white"] = white[k]["std"]
             # never below the white-noise 1σ, to the last digit (the floor is applied to the
@@ -294,7 +204,7 @@ def calibrate(
             params[k]["std"] = max(params[k]["std"], white[k]["std"])
     diagnostics = fit_diagnostics(per_rec, obs, res, resid, s2=s2, gcos=gcos,
                                   uncertainty=uncertainty)  # fmt: skip
-    warnings = _poor_fit_warnings(per_rec)
+    warnings = poor_fit_warnings(per_rec)
     checks = {}
     if ok:
         checks = check_fit(params, per_rec, float(np.asarray(nominal.natural_frequencies_hz)[0]),
@@ -318,11 +228,47 @@ def calibrate(
         optimum=optimum,
         covariance=cov,
     )
-    out.record = _updated_record(record, out, pin, static, obs, problem)
-    from ._amplitude import finish  # amplitude dependence and the choice of model
-
-    return finish(out, obs, model, nl_terms, resid=resid_w, jac=jac, core=res.amplitude,
+    out.record = record_with_fit(record, out, pin, static, obs, problem)
+    # amplitude dependence and the choice of model
+    return choose_model(out, obs, model, nl_terms, resid=resid_w, jac=jac, core=res.amplitude,
                   free_modes=free_modes)  # fmt: skip
+
+
+def _check_model(model: str, obs, static, free_modes: bool, n_modes: int, added_mass) -> None:
+    """Refuse a model the recordings (or the other arguments) cannot be fitted with."""
+    if model not in ("linear", "nonlinear", "auto"):
+        raise CalibrationError(f"model must be linear, nonlinear or auto, not {model!r}")
+    if model == "nonlinear" and (static is not None or any(o.excitation != "decay" for o in obs)):
+        raise CalibrationError(
+            "the nonlinear model fits free decays only (no sine, base motion or static test); "
+            "fit those with --model linear"
+        )
+    if free_modes:
+        _check_free_modes(model, n_modes, static, obs)
+    if added_mass is not None and model != "linear":
+        raise CalibrationError(
+            "the added-mass method fits the linear model; leave out --model (or give linear)"
+        )
+
+
+def _check_linear(obs, pin: str, n_modes: int, f1_start_hz) -> None:
+    """Refuse a pin, a number of modes, samples or a start frequency no fit can use."""
+    if pin not in PINS:
+        raise CalibrationError(f"pin must be one of {PINS}, not {pin!r}")
+    if not 1 <= n_modes <= 10:
+        raise CalibrationError(f"n_modes = {n_modes} must be between 1 and 10")
+    for o in obs:  # sums of squares of such samples overflow: no fit can be computed
+        if float(np.max(np.abs(o.y))) > MAX_SAMPLE:
+            raise CalibrationError(
+                f"{o.name}: the samples reach {float(np.max(np.abs(o.y))):.3g}, too large to "
+                "fit in any units (their squares overflow): scale the signal to the "
+                "observable's units (--scale)"
+            )
+    if f1_start_hz is not None and not (np.isfinite(f1_start_hz) and f1_start_hz > 0):
+        raise CalibrationError(
+            f"the f1 to start from ({f1_start_hz!r} Hz, --f1-start) must be a positive "
+            "frequency: give the frequency in Hz that the whisker rings at, or leave it out"
+        )
 
 
 def _check_free_modes(model: str, n_modes: int, static, obs) -> None:
@@ -343,48 +289,7 @@ def _check_free_modes(model: str, n_modes: int, static, obs) -> None:
         )
 
 
-def fit_status(status: str, ok: bool, warnings: list[str], checks: dict[str, str]):
-    """The status a converged fit reports and its warnings: ``poor fit`` when a recording
-    fits poorly, else ``check`` when a check failed (each failed check is also a warning);
-    shared by the linear, added-mass and nonlinear fits."""
-    if ok and warnings:
-        status = "poor fit"
-    elif ok and checks:
-        status = "check"
-    return status, warnings + [f"{name}: {text}" for name, text in checks.items()]
-
-
-def fit_diagnostics(per_rec, obs, res, resid, *, s2, gcos, uncertainty) -> dict:
-    """The ``diagnostics`` of a calibration: residual sizes and correlation per recording,
-    the solver's figures (``res``: its ``value`` and ``steps``) and which covariance the 1σ
-    come from (shared by the linear, added-mass and nonlinear fits)."""
-    return {
-        "rms_residual": [r["rms_residual"] for r in per_rec],
-        "reduced_chi2": s2,
-        "gradient_cosine": gcos,
-        "n_samples": int(sum(o.t.size for o in obs)),
-        "n_params": int(res.value.size),
-        "steps": int(res.steps),
-        "lag1_autocorr": [r["lag1_autocorr"] for r in per_rec],
-        "weighted_rms": float(np.sqrt(np.mean(resid**2))),
-        "uncertainty": uncertainty,
-    }
-
-
-def _blocks(jac, resid, obs, correlated=True):
-    """``(J, r, correlated)`` rows of each recording, then the static test's rows (if any),
-    which are independent points."""
-    out, start = [], 0
-    for o in obs:
-        stop = start + o.t.size
-        out.append((jac[start:stop], resid[start:stop], correlated))
-        start = stop
-    if start < resid.size:
-        out.append((jac[start:], resid[start:], False))
-    return out
-
-
-def _report(record, problem, reported, cov, static, nominal, modulus_tolerance=0.0):
+def _linear_params(record, problem, reported, cov, static, nominal, modulus_tolerance=0.0):
     structure = record.structure
     pin = problem.pin
     values, jac = reported
@@ -392,9 +297,7 @@ def _report(record, problem, reported, cov, static, nominal, modulus_tolerance=0
     dcov = np.asarray(jac) @ cov @ np.asarray(jac).T
     if pin == "material" and static is None:  # ρa and C scale with the assumed modulus
         dcov = dcov + modulus_covariance(names, np.asarray(values), modulus_tolerance)
-    std = np.sqrt(np.maximum(np.diag(dcov), 0.0))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        corr = dcov / np.outer(std, std)
+    std = reported_std(dcov)
     pinned = {"geometry": "rho_a", "material": "EI"}[pin]
     params = {}
     for i, name in enumerate(names):
@@ -453,148 +356,4 @@ def _report(record, problem, reported, cov, static, nominal, modulus_tolerance=0
             if static is None
             else ""
         )
-    correlations = {"names": list(names), "matrix": np.round(np.nan_to_num(corr), 6).tolist()}
-    return params, correlations, fixed, note
-
-
-#: A recording fitted below this SNR (signal RMS over residual RMS, in dB) is a poor fit:
-#: the model explains less than half of the signal's variance.
-POOR_FIT_SNR_DB = 3.0
-
-
-def _poor_fit_warnings(per_rec: list[dict]) -> list[str]:
-    """A warning per recording that the fitted model leaves mostly unexplained."""
-    return [
-        f"poor fit of {r['name']}: the model explains little of the signal (SNR "
-        f"{r['snr_db']:.3g} dB); check the time units (seconds), the observable and the "
-        "excitation"
-        for r in per_rec
-        if not r["snr_db"] >= POOR_FIT_SNR_DB
-    ]
-
-
-def _per_recording(problem: FitProblem, optimum, obs, models, resid, peak_refs=None,
-                   moments=None):  # fmt: skip
-    """Nuisances and residual diagnostics per recording, the curves for plots, and the
-    weighted residual vector (``models``: each recording's normalised model and its modal
-    parts, from the compiled fit; ``peak_refs``: :func:`_checks.peak_reference` of each
-    recording, ``moments``: :func:`_checks.moments`, when already computed)."""
-    out, curves = [], []
-    peak_refs = peak_refs or [None] * len(obs)
-    moments = moments or recording_moments(obs)
-    for spec, rec, (model_n, modal), o, ref, (y_mean, y_std) in zip(
-        problem.recordings, optimum["recs"], models, obs, peak_refs, moments, strict=True
-    ):
-        model = model_n * y_std + y_mean
-        r = o.y - model
-        lag1 = lag1_autocorr(r)
-        c = np.asarray(rec["c"])
-        nm = problem.n_modes
-        amps = np.hypot(c[2 : 2 + nm], c[2 + nm : 2 + 2 * nm]) * y_std
-        modal_rms = [float(v) for v in np.sqrt(np.mean(modal**2, axis=0)) * y_std]
-        rms = np.sqrt(np.mean(r**2))
-        info = {
-            "name": o.name,
-            "source": o.source,
-            "excitation": o.excitation,
-            "observable": o.observable,
-            "n_samples": int(o.t.size),
-            "t_start_s": float(o.t[0]),
-            "rms_residual": float(rms),
-            "rms_signal": y_std,
-            "snr_db": float(20 * np.log10(y_std / max(rms, 1e-300))),
-            "lag1_autocorr": lag1,
-            "residual_peak": residual_peak(o.t, r, o.y, data=ref),
-            "selection": o.selection,
-            "offset": float(c[0] * y_std + y_mean),
-            "drift_per_s": float(c[1] * y_std / max(o.t[-1] - o.t[0], 1e-12)),
-            "modal_amplitudes": [float(a) for a in amps],
-            "modal_rms": modal_rms,
-        }
-        if spec.excitation == "sine" and spec.forced == "known":
-            info["start_time_s"] = float(rec["tau"])
-        if spec.forced == "free":
-            # amplitude of the forced response in observed units, relative to the nominal
-            k = c[2 + 2 * nm :]
-            info["forced_scale"] = float(np.hypot(*k)) if k.size == 2 else float(k[0])
-            info["note"] = "gain and excitation amplitude appear only as a product"
-        out.append(info)
-        curves.append((o.t, o.y, model))
-    return out, curves, np.asarray(resid)
-
-
-def _plausible_structure(record, structure, cal: Calibration):
-    """``structure`` if a record can hold it; else the record's own, and ``cal`` marked
-    ``check`` (a fit far from the record, on an alias or from a wrong record, can imply a
-    modulus no material has: the calibration says so instead of failing to write it)."""
-    from ..model import RecordError
-
-    try:
-        record.replace(structure=structure)
-    except RecordError as err:
-        text = (
-            f"the fitted EI implies {err}; the record's structure is kept: check the record "
-            "and the recording (an alias of f1?)"
-        )
-        cal.checks["implausible-structure"] = text
-        cal.warnings.append(f"implausible-structure: {text}")
-        if cal.status == "ok":
-            cal.status = "check"
-        return record.structure
-    return structure
-
-
-def _updated_record(record, cal: Calibration, pin, static, obs, problem):
-    from dataclasses import replace
-
-    p = cal.params
-    n = problem.n_modes
-    if problem.zeta_per_mode:
-        zeta = tuple(float(p[f"zeta_{i + 1}"]["value"]) for i in range(n))
-        if record.n_modes > n:
-            zeta = zeta + (zeta[-1],) * (record.n_modes - n)
-    else:
-        zeta = float(p["zeta"]["value"])
-    structure = record.structure
-    if cal.ok and "EI" in p and p["EI"]["source"] != "fit":
-        ei = p["EI"]["value"]
-        if isinstance(structure, UniformBeam):
-            structure = replace(structure, youngs_modulus_pa=ei / structure.second_moment_m4)
-        else:
-            structure = replace(structure, shear_modulus_pa=ei / structure.polar_moment_m4)
-        structure = _plausible_structure(record, structure, cal)
-    files = []
-    for o in obs:
-        if o.source and Path(o.source).exists():
-            files.append({"path": str(o.source), "sha256": sha256_of(o.source), "name": o.name})
-    if static is not None and static.source and Path(static.source).exists():
-        files.append(
-            {"path": static.source, "sha256": sha256_of(static.source), "name": "static test"}
-        )
-
-    fit = {
-        "status": cal.status,
-        "solver": cal.solver,
-        "n_modes": n,
-        "zeta_per_mode": problem.zeta_per_mode,
-        "pin": "static test" if static is not None else pin,
-        "identifiability": cal.note,
-        "params": {
-            k: {"value": v["value"], "std": v["std"], "source": v["source"]} for k, v in p.items()
-        },
-        "fixed": cal.fixed,
-        "correlations": cal.correlations,
-        "rms_residual": cal.diagnostics["rms_residual"],
-        "reduced_chi2": cal.diagnostics["reduced_chi2"],
-        "n_samples": cal.diagnostics["n_samples"],
-        "recordings": [{k: v for k, v in r.items() if v is not None} for r in cal.per_recording],
-        "data_files": files,
-        "whiskerid_version": __version__,
-        "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
-    }
-    if cal.warnings:
-        fit["warnings"] = list(cal.warnings)
-    extra = dict(record.extra)
-    extra["fit"] = fit
-    desc = record.description
-    return record.replace(structure=structure, zeta=zeta, extra=extra, description=desc)
+    return params, correlation_table(names, dcov, std), fixed, note
