@@ -80,7 +80,7 @@ def wilson(k: int, n: int, z: float = 1.96) -> list[float]:
     p = k / n
     mid = (p + z**2 / (2 * n)) / (1 + z**2 / n)
     half = z * np.sqrt(p * (1 - p) / n + z**2 / (4 * n**2)) / (1 + z**2 / n)
-    return [round(float(mid - half), 3), round(float(mid + half), 3)]
+    return [round(max(float(mid - half), 0.0), 3), round(min(float(mid + half), 1.0), 3)]
 
 
 def realisations(args) -> dict:

@@ -106,8 +106,9 @@ def main() -> None:
     ap.add_argument("--skip-power", action="store_true")
     args = ap.parse_args()
     out = {"alpha": args.alpha, "duration_s": args.duration, "rate_hz": FS,
-           "groups_per_null": args.groups, "groups_per_power_cell": args.power_groups,
-           "nulls": nulls(args.groups, args.alpha, args.duration)}  # fmt: skip
+           "groups_per_null": args.groups, "groups_per_power_cell": args.power_groups}  # fmt: skip
+    if args.groups > 0:
+        out["nulls"] = nulls(args.groups, args.alpha, args.duration)
     if not args.skip_power:
         out["power"] = power(args.power_groups, args.alpha, args.duration)
     print(json.dumps(out, indent=1))
