@@ -9,7 +9,7 @@ p-values against the uniform distribution, for the Welch test (``sideband_test``
 (``line_sideband_test``, what it uses now). Per positive: the detection rate
 (``present``) against depth and SNR, on-bin and half-bin. Prints one JSON object.
 
-    .venv/bin/python benchmarks/sideband_calibration.py [--groups 300] [--power-groups 40]
+    .venv/bin/python benchmarks/sideband_calibration.py [--groups 300] [--power-groups 15]
 """
 
 import argparse
@@ -78,10 +78,11 @@ def nulls(groups, alpha, duration_s):
 
 def power(groups, alpha, duration_s):
     rows = []
-    for kind, depths in (("am", (0.01, 0.03, 0.1, 0.3)), ("fm", (0.03, 0.3)),
-                         ("asymmetric", (0.1, 0.3))):  # fmt: skip
+    cells = (("am", (0.03, 0.1, 0.3), (20.0, 30.0, 40.0)), ("fm", (0.3,), (30.0,)),
+             ("asymmetric", (0.3,), (30.0,)))  # fmt: skip
+    for kind, depths, snrs in cells:
         for depth in depths:
-            for snr in (20.0, 30.0, 40.0):
+            for snr in snrs:
                 row = {"kind": kind, "depth": depth, "snr_db": snr}
                 for place in ("on", "half"):
                     rng = np.random.default_rng([47, 1000, round(depth * 1000), int(snr)])
@@ -100,7 +101,7 @@ def power(groups, alpha, duration_s):
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--groups", type=int, default=300, help="recordings per null kind")
-    ap.add_argument("--power-groups", type=int, default=40, help="recordings per power cell")
+    ap.add_argument("--power-groups", type=int, default=15, help="recordings per power cell")
     ap.add_argument("--duration", type=float, default=20.0, help="recording length (s)")
     ap.add_argument("--alpha", type=float, default=0.01)
     ap.add_argument("--skip-power", action="store_true")
