@@ -104,15 +104,16 @@ def realisations(args) -> dict:
                         res = analyze_dataset(tmp, segment_s=2.0)
                     sbs = [next(iter(g.values()))["sidebands"] for g in res["groups"].values()]
                     k = sum(bool(sb["present"]) for sb in sbs)
-                    l80 = [sb.get("length_80_s") for sb in sbs]
-                    l80 = [x for x in l80 if x is not None]
+                    # runs with no side line measured need an unbounded length: infinite
+                    l80 = [sb.get("length_80_s") or np.inf for sb in sbs]
+                    med = float(np.median(l80))
                     cells.append({
                         "condition": name, "terrain": terrain, "speed_mps": v,
                         "length_s": length, "found": k, "of": len(sbs),
                         "share": round(k / len(sbs), 3), "wilson95": wilson(k, len(sbs)),
                         "carrier_significant": sum(sb["carrier_p_value"] < 0.01 for sb in sbs),
-                        "median_length_80_s": (round(float(np.median(l80)), 1) if l80
-                                               else None),
+                        "median_length_80_s": round(med, 1) if np.isfinite(med) else None,
+                        "length_80_s": [round(x, 1) if np.isfinite(x) else None for x in l80],
                         "contact_fraction_median": round(float(np.median(
                             [float(r.meta["contact_fraction"]) for r in recs])), 3),
                         "simulation_wall_s": round(wall, 1),
