@@ -121,6 +121,11 @@ def test_cli_analyze_finds_the_modulated_terrain(tmp_path, capsys, how):
         assert mod["dominant_at_perturbation"] and plain["dominant_at_perturbation"]
         assert mod["sandwiched"] and abs(mod["sidebands"]["delta_hz"] - 3.0) < 0.3
         assert not plain["sandwiched"]
+        for g in (mod, plain):  # the test used, the carrier's own p-value, the power
+            sb = g["sidebands"]
+            assert sb["test"] == wi.classify.TEST_NAME and sb["carrier_p_value"] < 1e-3
+            assert {"present", "p_value", "delta_hz", "power"} <= set(sb)
+        assert mod["sidebands"]["power"] > 0.9 and mod["sidebands"]["p_value"] < 1e-3
         want = "metadata" if how == "metadata" else "speed and wheel geometry"
         assert mod["perturbation_source"] == want
     assert res["claim"]["sandwiched"] == 0.5

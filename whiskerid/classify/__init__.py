@@ -42,6 +42,10 @@ from ._features import band_energies as band_energies
 from ._features import base_band_levels as base_band_levels
 from ._features import compute_features as compute_features
 from ._features import spectral_peaks as spectral_peaks
+from ._line_sidebands import TEST_NAME as TEST_NAME
+from ._line_sidebands import line_f as line_f
+from ._line_sidebands import line_f_at as line_f_at
+from ._line_sidebands import line_sideband_test as line_sideband_test
 from ._mlp import TrainConfig as TrainConfig
 from ._mlp import default_config as default_config
 from ._model_file import ClassifierModel as ClassifierModel

@@ -14,11 +14,13 @@ speed:
   the gear ratio for a motor shaft's tone); whether the dominant line is at ``f_b``
   (within two bins);
 * **sidebands** at ``f_b ± Δ`` (around the dominant line when ``f_b`` is unknown): the
-  statistical test of :func:`whiskerid.classify.sideband_test` on non-overlapping windows
-  of the group's recordings (amplitude against the local noise floor, symmetry of
-  ``Δ``, consistency across windows; a p-value). A group is *sandwiched* when its
-  sidebands are present by that test (not merely when the dominant peak lies between the
-  next two largest, which one time in three it does by chance);
+  test of :func:`whiskerid.classify.line_sideband_test` on the group's recordings (a
+  significant carrier line, then two lines at ``f_c ± Δ``: ``Δ`` chosen on the first
+  halves, the weaker side tested on the second; multitaper F-tests, so that random
+  modulation, a resonance's skirts and one-sided lines are no sidebands and a line counts
+  wherever it falls between bins). A group is *sandwiched* when its sidebands are present
+  by that test (not merely when the dominant peak lies between the next two largest,
+  which one time in three it does by chance);
 * whether terrains (at one speed) and speeds (on one terrain) are told apart by their
   dominant frequency: the two means differ by more than twice the combined spread.
 
@@ -34,7 +36,7 @@ import numpy as np
 
 from ..io import RecordingError, read_recording
 from ._dataset import list_dataset, recording_rate, recording_signal, recording_speed, windows_of
-from ._sidebands import sideband_test, welch_dof, welch_power
+from ._line_sidebands import TEST_NAME, line_sideband_test
 
 
 def _spectrum(rec, channel, rate_hz, segment_s):
@@ -66,16 +68,18 @@ def _peaks(freqs, amps, n):
                       min_relative=1e-3)  # fmt: skip
 
 
-def _window_powers(rec, channel, rate_hz, segment_s):
-    """Welch power spectra of the recording's non-overlapping windows of three
-    half-overlapping segments: ``(powers, k)``."""
+def _series(rec, channel, rate_hz):
+    """The recording's channel on a uniform grid at ``rate_hz``: its longest stretch
+    without gaps."""
     x = recording_signal(rec, channel, only_column_ok=True)
-    n = round(segment_s * rate_hz)
-    wins, _ = windows_of(rec.t, x, rate_hz=rate_hz, window=2 * n, hop=2 * n)
-    if len(wins) == 0:
-        return np.zeros((0, n // 2 + 1)), 3
-    out = [welch_power(w, n) for w in wins]
-    return np.stack([p for p, _ in out]), out[0][1]
+    t = np.asarray(rec.t, dtype=float)
+    n = int(np.floor((t[-1] - t[0]) * rate_hz * (1 + 1e-9))) + 1 if t.size > 1 else 0
+    while n >= 16:
+        wins, _ = windows_of(t, x, rate_hz=rate_hz, window=n, hop=n)
+        if len(wins):
+            return wins[0]
+        n = n * 3 // 4
+    return np.zeros(0)
 
 
 def _perturbation(recs, speed, given_hz, per_rev, wheel_diameter_m):
@@ -109,8 +113,8 @@ def analyze_dataset(
         root: A dataset folder ``ROOT/<label>/<recording>``; recordings without
             ``speed_mps`` metadata form one group per label (speed ``None``).
         channel: Column to analyse (each recording's first signal column by default).
-        segment_s: Length of the Welch segments (s): the frequency resolution is its
-            reciprocal. The sideband test's windows are two segments long.
+        segment_s: Length of the Welch segments (s) of the dominant line: the frequency
+            resolution is its reciprocal. The sideband test uses whole recordings.
         rate_hz: Rate to resample to; the first recording's by default.
         n_components: Spectral peaks reported per group (the dominant one first).
         time_col: Name of the recordings' time column.
@@ -142,8 +146,8 @@ def analyze_dataset(
             speed = recording_speed(rec)
             key = (label, round(speed, 4) if np.isfinite(speed) else None)
             per_group.setdefault(key, []).append(
-                (rec, _spectrum(rec, channel, rate, segment_s),
-                 _window_powers(rec, channel, rate, segment_s)))  # fmt: skip
+                (rec, _spectrum(rec, channel, rate, segment_s), _series(rec, channel, rate))
+            )
     groups: dict[str, dict] = {}
     summary = {}
     fb_args = (perturbation_hz, per_rev, wheel_diameter_m)
@@ -153,7 +157,7 @@ def analyze_dataset(
         return label, speed or 0.0
 
     for (label, speed), items in sorted(per_group.items(), key=order):
-        entry = _group(items, speed, segment_s, n_components, fb_args, alpha)
+        entry = _group(items, speed, rate, n_components, fb_args, alpha)
         groups.setdefault(label, {})[str(speed)] = entry
         summary[(label, speed)] = entry
     claim = _claim(summary, alpha)
@@ -162,7 +166,7 @@ def analyze_dataset(
             "alpha": alpha}  # fmt: skip
 
 
-def _group(items, speed, segment_s, n_components, fb_args, alpha) -> dict:
+def _group(items, speed, rate_hz, n_components, fb_args, alpha) -> dict:
     spectra = [s for _, s, _ in items]
     freqs = spectra[0][0]
     df = float(freqs[1])
@@ -172,14 +176,17 @@ def _group(items, speed, segment_s, n_components, fb_args, alpha) -> dict:
     spread = float(np.std(dominant, ddof=1)) if len(dominant) > 1 else df
     dom = comps[0].frequency_hz if comps else float("nan")
     fb, source = _perturbation([r for r, _, _ in items], speed, *fb_args)
-    powers = np.concatenate([p for _, _, (p, _) in items])
-    k = items[0][2][1]
+    recs = [r for r, _, _ in items]
+    series = [x for _, _, x in items if x.size]
     carrier = fb if fb is not None else dom
-    if powers.shape[0] == 0 or not np.isfinite(carrier):
-        bands = {"present": False, "p_value": 1.0, "windows": int(powers.shape[0]),
-                 "reason": "recordings shorter than two segments"}  # fmt: skip
+    per_rec = [float(r.meta["perturbation_hz"]) for r in recs if "perturbation_hz" in r.meta]
+    carriers = per_rec if source == "metadata" and len(series) == len(recs) else carrier
+    if not series or not np.isfinite(carrier):
+        bands = {"test": TEST_NAME, "present": False, "p_value": 1.0, "carrier_p_value": 1.0,
+                 "delta_hz": None, "power": None, "recordings": len(series),
+                 "reason": "no recording long enough"}  # fmt: skip
     else:
-        bands = sideband_test(powers, df, carrier, welch_dof(k), alpha=alpha)
+        bands = line_sideband_test(series, rate_hz, carriers, alpha=alpha)
     at_fb = None if fb is None or not np.isfinite(dom) else bool(abs(dom - fb) <= 2 * df)
     return {
         "components": [[round(c.frequency_hz, 3), float(f"{c.amplitude:.4g}")] for c in comps],
@@ -203,12 +210,14 @@ def _group_words(dom, fb, at_fb, bands) -> str:
     if bands.get("delta_hz") is None:
         words.append("no sideband test (" + bands.get("reason", "no windows") + ")")
     elif bands["present"]:
-        words.append(f"symmetric sidebands at ±{bands['delta_hz']:.2f} Hz (p = "
-                     f"{bands['p_value']:.2g}, {bands['level_db']:.1f} dB re carrier)")  # fmt: skip
+        words.append(f"sidebands at ±{bands['delta_hz']:.2f} Hz (p = {bands['p_value']:.2g}, "
+                     f"{bands['level_db']:.1f} dB re carrier)")  # fmt: skip
     else:
+        cp = bands["carrier_p_value"]
+        carrier = "" if cp < bands["alpha"] else f", no significant carrier (p = {cp:.2g})"
+        power = "" if bands["power"] is None else f", power {bands['power']:.2f}"
         words.append(f"no sidebands (best ±{bands['delta_hz']:.2f} Hz: p = "
-                     f"{bands['p_value']:.2g}, consistency "
-                     f"{bands['consistency']:.2f})")  # fmt: skip
+                     f"{bands['p_value']:.2g}{power}{carrier})")  # fmt: skip
     return "; ".join(words)
 
 

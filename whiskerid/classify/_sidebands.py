@@ -1,4 +1,12 @@
-"""A statistical test for symmetric sidebands ``f_c ± Δ`` around a carrier line.
+"""A statistical test for symmetric sidebands ``f_c ± Δ`` around a carrier line (Welch
+spectra against a local floor).
+
+Superseded: ``whiskerid analyze`` uses :func:`whiskerid.classify.line_sideband_test`. This
+test is kept for comparison (``benchmarks/sideband_calibration.py``): on structured nulls
+(random modulation in a band, free ringing, phase jitter) its p-values pile up at 1 and
+``p < α`` comes up to 70 times as often as ``α``, and it loses most sidebands that fall
+half-way between bins (its side-bin choice takes the largest floor ratio among neighbours,
+then requires a power peak there).
 
 Modulation of a response at ``f_c`` by a slower process of frequency ``Δ`` (contact that
 opens and closes, stick–slip, a texture passing under the tip) puts two lines at

@@ -68,6 +68,7 @@ from ._profile import (
     vary,
     wheel_filter,
 )
+from ._runs import _CONTACT_SOURCE, _check_runs, _run_rng
 from ._sensor import amplified_hall
 
 TIP_AHEAD_M = 0.04  # the tip's contact point ahead of the front axle (m)
@@ -224,8 +225,6 @@ def iter_contact_runs(
         drive_gain: Factor on the drivetrain's vibration (the body perturbation).
         rtol: Solver relative tolerance.
     """
-    from ._terrain import _CONTACT_SOURCE, _check_runs, _run_rng
-
     record = paper_record() if record is None else record
     _check_runs(specs, duration_s, rate_hz, 1)
     whisker = record.whisker()

@@ -75,20 +75,24 @@ a seed and does not depend on which other terrains or speeds are synthesised wit
 
 import os
 import shutil
+import sys
 import tempfile
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
 import jax.numpy as jnp
 import numpy as np
+from tqdm import tqdm
 
 from ..io import Recording, write_csv
 from ..model import (
     WhiskerRecord,
     paper_record,
 )
+from ._contact_runs import DEFAULT_PRELOAD_M, iter_contact_runs
 from ._motion import base_acceleration, base_acceleration_planes
-from ._profile import TERRAIN_FAMILIES, TERRAINS
+from ._profile import TERRAINS
+from ._runs import _CONTACT_SOURCE, _SOURCE, RunSpec, _check_runs, _run_rng
 from ._sensor import (
     AMPLIFIER,
     PLANE_COLUMNS,
@@ -100,23 +104,6 @@ from ._sensor import (
 
 SPEEDS_MPS = (0.10, 0.15, 0.20, 0.25, 0.30)
 MIN_DATASET_DURATION_S = 2.0  # shortest recording synthesize_dataset makes: a window is 1 s
-_SOURCE = "whiskerid terrain simulator"  # metadata that marks the simulator's recordings
-_CONTACT_SOURCE = "whiskerid contact simulator"  # the same, with the tip on the ground
-
-
-@dataclass(frozen=True)
-class RunSpec:
-    """One synthetic recording to make: terrain, nominal speed and run number."""
-
-    terrain: str
-    speed_mps: float
-    run: int
-
-
-def _run_rng(seed: int, spec: RunSpec, *stream: int) -> np.random.Generator:
-    return np.random.default_rng(
-        [seed, TERRAINS.index(spec.terrain), round(spec.speed_mps * 1000), spec.run, *stream]
-    )
 
 
 def run_base_motion(
@@ -139,21 +126,6 @@ def _run_motion(spec: RunSpec, duration_s: float, seed: int, channels: int):
         t, acc = base_acceleration_planes(spec.terrain, spec.speed_mps, duration_s, rng,
                                           _run_rng(seed, spec, 1))  # fmt: skip
     return t, acc, rng
-
-
-def _check_runs(specs, duration_s, rate_hz, channels) -> None:
-    for s in specs:
-        if s.terrain not in TERRAIN_FAMILIES:
-            raise ValueError(f"unknown terrain {s.terrain!r}; known: {', '.join(TERRAINS)}")
-        if not 0 < s.speed_mps < 5:
-            raise ValueError(f"speed {s.speed_mps!r} m/s is not plausible (0 < v < 5)")
-    if not (np.isfinite(duration_s) and np.isfinite(rate_hz)) or duration_s * rate_hz < 2:
-        raise ValueError(
-            f"duration_s = {duration_s!r} and rate_hz = {rate_hz!r} must be numbers giving "
-            "at least 2 samples"
-        )
-    if channels not in (1, 2):
-        raise ValueError(f"channels must be 1 (one Hall sensor) or 2 (two), not {channels!r}")
 
 
 def synthesize_runs(
@@ -338,8 +310,6 @@ def synthesize_dataset(
     paths = dataset_paths(out, specs)
     _check_dataset_folder(Path(out), paths if replace_synthetic else [])
     if contact:
-        from ._contact_runs import DEFAULT_PRELOAD_M, iter_contact_runs
-
         preload = DEFAULT_PRELOAD_M if preload_m is None else preload_m
         recs = iter_contact_runs(specs, record=record, duration_s=duration_s, seed=seed,
                                  preload_m=preload)  # fmt: skip
@@ -347,10 +317,6 @@ def synthesize_dataset(
         recs = iter_runs(specs, record=record, duration_s=duration_s, seed=seed,
                          channels=channels)  # fmt: skip
     if progress:
-        import sys
-
-        from tqdm import tqdm
-
         recs = tqdm(recs, total=len(specs), desc="dataset synth", unit="run", file=sys.stderr,
                     leave=False)  # fmt: skip
     out = Path(out)
