@@ -174,7 +174,9 @@ def _add_drive(fsub) -> None:
                    help="the whisker's record (TOML): f1 and zeta to start from")  # fmt: skip
     p.add_argument("--signal-col", help="signal column (the first one by default)")
     p.add_argument("--time-col", default="t", help="time column (s)")
-    p.add_argument("--block", type=float, default=60.0, help="longest block (s)")
+    p.add_argument("--block", type=float, default=60.0,
+                   help="longest block (s, 20-86400); a drive needs at least 4 blocks (240 s "
+                   "of driving with 60 s blocks)")  # fmt: skip
     p.add_argument("--force", action="store_true",
                    help="replace the session's row if the health log has it")  # fmt: skip
     p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
