@@ -145,7 +145,7 @@ def main() -> None:
     rows = []
     for k in range(args.drives):
         rng = np.random.default_rng(500 + k)
-        f1, zeta = rng.uniform(20, 80), rng.uniform(0.02, 0.08)
+        f1, zeta = rng.uniform(20, 75), rng.uniform(0.02, 0.08)
         # every other drive has a second mode (a whisker's second bending mode) far above
         modes = ((min(6.3 * f1, 95.0), 0.02, 0.05),) if k % 2 else ()
         signals = drive(rng, f1, zeta, minutes=args.minutes, modes=modes)
