@@ -1,6 +1,7 @@
 """``whiskerid fleet calibrate|check``: calibrate many whiskers session after session, and
 flag the sessions in which a whisker has changed."""
 
+import hashlib
 import sys
 from pathlib import Path
 
@@ -152,7 +153,8 @@ def _add_drive(fsub) -> None:
             "Output-only identification of a whisker's f1 and zeta from recordings made while "
             "driving: each recording (cut into blocks of --block seconds) gives a Welch "
             "spectrum; narrow lines (the motor, periodic textures) are masked; each block's "
-            "log-spectrum over 0.8-1.25 f1 is fitted by the resonance of the base-motion "
+            "log-spectrum over 0.8-1.25 f1 (wider, +-6 zeta f1, for a broad peak) is fitted by "
+            "the resonance of the base-motion "
             "model times the base's spectrum: a smooth part (a quadratic in ln f), the ripple "
             "of the rear axle's echo of the front's profile (its delay from the cepstrum) "
             "and a contact patch's null (its place searched), with a Cauchy loss; "
@@ -173,7 +175,9 @@ def _add_drive(fsub) -> None:
                    help="the whisker's record (TOML): f1 and zeta to start from")  # fmt: skip
     p.add_argument("--signal-col", help="signal column (the first one by default)")
     p.add_argument("--time-col", default="t", help="time column (s)")
-    p.add_argument("--block", type=float, default=60.0, help="longest block (s)")
+    p.add_argument("--block", type=float, default=60.0,
+                   help="longest block (s, 20-86400); a drive needs at least 4 blocks (240 s "
+                   "of driving with 60 s blocks)")  # fmt: skip
     p.add_argument("--force", action="store_true",
                    help="replace the session's row if the health log has it")  # fmt: skip
     p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
@@ -187,13 +191,13 @@ def _cmd_drive(args) -> dict:
 
     from ..io import RecordingError, read_recording
 
-    if not (args.block >= 20):
-        raise CommandError(f"--block {args.block} must be at least 20 s (two 10 s windows)")
+    if not (args.block >= 20 and args.block <= 86400):
+        raise CommandError(f"--block {args.block} must be 20 s (two 10 s windows) to 86400 s")
     for name, value in (("--whisker-id", args.whisker_id), ("--session", args.session)):
         if not value.strip() or "/" in value or value.startswith((".", "_")):
             raise CommandError(f"{name} {value!r} must be a plain name (no '/', no leading "
                                "'.' or '_')")  # fmt: skip
-    signals, rates = [], []
+    signals, rates, seen = [], [], {}
     for path in args.recordings:
         try:
             rec = read_recording(path, time_col=args.time_col)
@@ -203,13 +207,37 @@ def _cmd_drive(args) -> dict:
         dt = np.diff(rec.t)
         if rec.t.size < 2 or not np.all(dt > 0):
             raise CommandError(f"{path}: its time column does not increase")
+        y = np.asarray(y, dtype=float)
+        _check_drive_signal(path, y)
+        digest = hashlib.sha256(y.tobytes()).hexdigest()
+        if digest in seen:
+            raise CommandError(f"{path} holds the same samples as {seen[digest]}: give each "
+                               "recording once")  # fmt: skip
+        seen[digest] = path
         rates.append(1.0 / float(np.median(dt)))
         signals.append((path.name, y))
     rate = float(np.median(rates))
     if max(abs(r / rate - 1) for r in rates) > 0.05:
         raise CommandError("the recordings' sample rates differ by more than 5 % "
                            f"({min(rates):.4g}-{max(rates):.4g} Hz); give one rate's")  # fmt: skip
-    from ..fleet import HEALTH_NAME, FleetError, health_row, identify_driving, read_table
+    from ..fleet import MIN_BLOCKS, driving_blocks
+
+    lengths = [y.size / rate for _, y in signals]
+    if driving_blocks(lengths, rate, args.block) < MIN_BLOCKS:
+        raise CommandError(
+            f"too short: {sum(lengths):.0f} s of driving in {len(lengths)} recording(s) give "
+            f"{driving_blocks(lengths, rate, args.block)} block(s) of --block "
+            f"{args.block:g} s; fleet drive needs at least {MIN_BLOCKS} blocks, "
+            f"{MIN_BLOCKS * args.block:g} s of driving (each recording at least 20 s)"
+        )
+    from ..fleet import (
+        HEALTH_NAME,
+        FleetError,
+        drive_problem,
+        health_row,
+        identify_driving,
+        read_table,
+    )
     from ..fleet import write_table as write_log
     from ..model import RecordError, load_record
 
@@ -240,9 +268,40 @@ def _cmd_drive(args) -> dict:
         say(f"{args.whisker_id}/{args.session}: {fit.status}: f1 {fit.f1_hz:.4g} ± "
             f"{fit.f1_std:.2g} Hz, zeta {fit.zeta:.3g} ± {fit.zeta_std:.2g} from {used} of "
             f"{len(fit.blocks)} block(s), {fit.seconds:.0f} s of driving; wrote {log}")  # fmt: skip
+        if fit.status != "ok":
+            say(f"  not ok: {drive_problem(fit)}; the drive is logged with status "
+                f"'{fit.status}' ('fleet check' flags it as 'fit')")  # fmt: skip
     return {"log": str(log), "status": fit.status, "f1_hz": fit.f1_hz, "f1_std": fit.f1_std,
             "zeta": fit.zeta, "zeta_std": fit.zeta_std, "f1_dof": fit.f1_dof,
-            "zeta_dof": fit.zeta_dof, "seconds": fit.seconds, "blocks": fit.blocks}  # fmt: skip
+            "zeta_dof": fit.zeta_dof, "seconds": fit.seconds, "blocks": fit.blocks,
+            "problem": "" if fit.status == "ok" else drive_problem(fit)}  # fmt: skip
+
+
+#: A recording with more than this fraction of its samples at its largest or smallest value
+#: is clipped (the converter's rail) or stuck: its spectrum is not the whisker's.
+RAIL_FRACTION = 0.02
+
+
+def _check_drive_signal(path, y) -> None:
+    """Refuse a driving recording that cannot hold a whisker's response: samples that are
+    not numbers, a constant signal, or one that sits on a rail."""
+    import numpy as np
+
+    bad = int(np.sum(~np.isfinite(y)))
+    if bad:
+        raise CommandError(f"{path}: {bad} sample(s) are not finite (NaN or inf); clean or "
+                           "drop the recording")  # fmt: skip
+    if y.size and np.ptp(y) == 0:
+        raise CommandError(f"{path}: the signal is constant ({y[0]:.6g}): a disconnected or "
+                           "stuck sensor, no driving response")  # fmt: skip
+    for what, value in (("largest", y.max()), ("smallest", y.min())):
+        share = float(np.mean(y == value))
+        if y.size >= 100 and share > RAIL_FRACTION:
+            raise CommandError(
+                f"{path}: {100 * share:.1f} % of the samples sit at its {what} value "
+                f"{value:.6g} (a rail or a stuck converter); the spectrum of a clipped signal "
+                "is not the whisker's"
+            )
 
 
 # --------------------------------------------------------------------------- calibrate

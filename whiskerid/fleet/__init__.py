@@ -23,8 +23,13 @@ from ._calibrate import session_key as session_key
 from ._check import FleetCheck as FleetCheck
 from ._check import WhiskerHistory as WhiskerHistory
 from ._check import check_fleet as check_fleet
+from ._driving import BLOCK_S as BLOCK_S
+from ._driving import MIN_BLOCKS as MIN_BLOCKS
+from ._driving import SEGMENT_S as SEGMENT_S
 from ._driving import DriveFit as DriveFit
 from ._driving import combine_blocks as combine_blocks
+from ._driving import drive_problem as drive_problem
+from ._driving import driving_blocks as driving_blocks
 from ._driving import health_row as health_row
 from ._driving import identify_driving as identify_driving
 from ._driving import mad_factor as mad_factor

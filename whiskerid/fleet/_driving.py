@@ -27,7 +27,8 @@ modelled with both (their parameters found in the data, not given):
    peak's top is never taken for a line whatever the start ζ), and two bins either side;
 3. the echo's delay τ is the peak of the cepstrum of the block's whole log-spectrum
    (:func:`echo_delay`: the ripple runs over every frequency, the resonance over a few Hz);
-4. each block's log-spectrum over ``[0.8, 1.25] f_1`` is fitted by
+4. each block's log-spectrum over ``[0.8, 1.25] f_1``, widened to ``±6ζf_1`` (six
+   half-widths, :data:`WINGS`) for a broad peak, is fitted by
    ``ln S = −ln|1 − (f/f_1)² + 2iζf/f_1|² + ln(1 + r cos 2πfτ) + ln(sinc²(fa) + ε)
    + c_0 + c_1 x + c_2 x²`` (``x = ln(f/f_1)``), τ refined, the null's crossing time ``a``
    started from a grid of places (:data:`NULLS`, and none), with a Cauchy loss (scale 0.5
@@ -53,7 +54,7 @@ drives, not with plucks (the two estimates need not agree to the last percent).
 
 import datetime
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -82,15 +83,39 @@ ECHO_S = (0.3, 4.0)
 #: median, hardly moves), and marked ``outlier`` in the health log (kept out of the blocks'
 #: spread that ``fleet check`` reads).
 OUTLIER_MADS = 5.0
-#: ζ's bias that every block shares, so that their spread cannot show it (relative): on
-#: simulated drives of two generators written apart (the terrain simulator's and one in
-#: NumPy/SciPy alone, 40 drives each) ζ read 4.9 and 3.6 % low on average, 2–3.5 % for
-#: ζ below 0.035 and 6.3 % above 0.05 (a broad peak's wings reach the band's edges, where
-#: the smooth base takes part of them). It is not corrected (its size depends on the
-#: base); the 1σ of ζ carries it in quadrature.
+#: ζ's bias that every block shares, so that their spread cannot show it (relative). With
+#: the band fixed at :data:`BAND`, a broad peak's wings reached the band's edges, where the
+#: smooth base took them: ζ 0.08 read 16–29 % low (independent drives,
+#: ``benchmarks/driving_damping_bias.py``). With the band widened to :data:`WINGS`
+#: half-widths, over f_1 20.5–75 Hz and ζ 0.02–0.08 the cells' mean errors are −5.2 … +6.6 %
+#: (rms 4.2 %; ζ 0.02 reads about 6 % high: the 10 s Hann window's leakage widens a narrow
+#: peak). It is not corrected (its size depends on the base); the 1σ of ζ carries it in
+#: quadrature.
 ZETA_SYSTEMATIC = 0.04
+#: Half-widths ``ζf_1`` the fitted band reaches either side of f_1 at least (the quick
+#: look's ζ; :func:`band_for`): with :data:`BAND` alone a broad peak's wings reached the
+#: band's edges, where the smooth base took them, and ζ read low.
+WINGS = 6.0
 #: Start places of the contact patch's null searched, relative to f_1.
 NULLS = tuple(np.linspace(0.7, 1.5, 9))
+#: Fewest blocks a drive needs (a 1σ from fewer has no finite spread, see
+#: :func:`combine_blocks`); with :data:`BLOCK_S`, 240 s of driving.
+MIN_BLOCKS = 4
+#: A drive's peak must beat the smooth base alone by this much in the median block:
+#: ``2Δcost/s²`` (:func:`peak_strength`: the robust cost's drop when the quick look's
+#: resonance, searched over the band, is added to the smooth base, over the residuals'
+#: robust variance; about a χ² of two degrees of freedom searched over the band where there
+#: is no peak). White noise and a railed sensor gave 0–5 a block, drives of ζ 0.02–0.08
+#: 14–700, and a two-axle robot whose contact patch's null sits near f_1 in half its
+#: minutes (which the smooth base cannot follow) a median of 8–30.
+PEAK_MIN = 6.0
+#: The blocks' f_1 must agree within this fraction of the peak's half-width ``ζf_1`` (their
+#: robust σ): a resonance's blocks scattered by 0.05–0.35 of it on simulated drives, fits to
+#: noise by 0.5–1 and more.
+SPREAD_MAX = 1.0
+#: Where else a peak is searched for (relative to the record's f_1): a whisker whose f_1
+#: moved out of :data:`BAND` must not be read at the band's edge.
+WIDE = (0.5, 2.0)
 
 
 @dataclass
@@ -98,10 +123,12 @@ class DriveFit:
     """What :func:`identify_driving` found.
 
     Attributes:
-        status: ``ok``, or why not (``too short``, ``no resonance``).
+        status: ``ok``, or why not: ``too short``, ``no resonance`` (fewer than half the
+            blocks fitted), or one of :func:`drive_status`'s.
         f1_hz, f1_std: First natural frequency and its 1σ (Hz).
         zeta, zeta_std: Its damping ratio and 1σ.
-        blocks: Per block: ``name``, ``f1_hz``, ``zeta``, ``status``.
+        blocks: Per block: ``name``, ``f1_hz``, ``zeta``, ``status``, ``peak`` (the
+            strength of the quick look's peak in it, :func:`peak_strength`).
         seconds: Driving time used (s).
         f1_dof, zeta_dof: Degrees of freedom of the 1σ (inlier blocks less one): a z-score
             against it has t-like tails (the 1σ already holds their spread).
@@ -127,6 +154,17 @@ def _blocks(signals, rate_hz: float, block_s: float):
         for k, a in enumerate(starts):
             piece = y[a : a + n] if k < len(starts) - 1 else y[a:]
             yield (f"{name}[{k}]" if len(starts) > 1 else name), piece
+
+
+def driving_blocks(seconds, rate_hz: float, block_s: float = BLOCK_S) -> int:
+    """How many blocks :func:`identify_driving` gets from recordings of these lengths (s):
+    blocks of ``block_s`` (the last at least half of it), each at least two Welch windows."""
+    n = 0
+    for s in seconds:
+        size = round(s * rate_hz)
+        y = np.zeros(max(size, 0))
+        n += sum(p.size >= 2 * SEGMENT_S * rate_hz for _, p in _blocks([("", y)], rate_hz, block_s))
+    return n
 
 
 def block_spectrum(y, rate_hz: float, *, segment_s: float = SEGMENT_S):
@@ -171,6 +209,64 @@ def echo_delay(f, p) -> float:
     return float(q[k][np.argmax(c[k])])
 
 
+def peak_strength(f, p, centre_hz: float, f1_hz: float, zeta: float) -> float:
+    """How far a resonance at ``f1_hz``, ``zeta`` beats the smooth base alone over the band
+    about ``centre_hz``: ``2Δcost/s²`` (see :data:`PEAK_MIN`); 0 with too few bins."""
+    from scipy.optimize import least_squares
+
+    keep = (f > BAND[0] * centre_hz) & (f < BAND[1] * centre_hz) & (p > 0) & line_mask(f, p)
+    if keep.sum() < 4 * (ORDER + 3) or not (f1_hz > 0 and zeta > 0):
+        return 0.0
+    ff, lp = f[keep], np.log(p[keep])
+    x = np.vander(np.log(ff / centre_hz), ORDER + 1)
+
+    def robust(y):
+        c = least_squares(lambda c: y - x @ c, np.linalg.lstsq(x, y, rcond=None)[0],
+                          loss="cauchy", f_scale=LOSS_SCALE)  # fmt: skip
+        return c.cost, c.fun
+
+    base_cost, _ = robust(lp)
+    peak_cost, res = robust(lp - _block_model(ff, f1_hz, zeta, 0.0, 1.0, 0.0, 1.0))
+    s = 1.4826 * float(np.median(np.abs(res)))
+    return max(0.0, 2 * (base_cost - peak_cost) / max(s * s, 1e-12))
+
+
+def peak_elsewhere(spectra, f1_hz: float, rate_hz: float) -> tuple[float, float, float]:
+    """The most prominent peak of the blocks' median log-spectrum in :data:`BAND` and
+    outside it (within :data:`WIDE` of ``f1_hz``, below 0.95 Nyquist), lines masked.
+
+    Prominence: the spectrum smoothed over ``±0.02 f1`` less its running median over
+    ``±0.25 f1`` (in ln; a resonance of ζ stands out by about ``ln(1/4ζ²)``).
+
+    Returns:
+        ``(prominence in the band, prominence outside, where outside (Hz))``.
+    """
+    from scipy.ndimage import median_filter, uniform_filter1d
+
+    f = spectra[0][1]
+    logs = []
+    for _, fb, pb in spectra:
+        lp = np.where((pb > 0) & line_mask(fb, pb), np.log(np.maximum(pb, 1e-300)), np.nan)
+        logs.append(lp)
+    with np.errstate(all="ignore"):
+        lp = np.nanmedian(np.array(logs), axis=0) if len(logs) > 1 else logs[0]
+    ok = np.isfinite(lp)
+    if ok.sum() < 10:
+        return 0.0, 0.0, math.nan
+    lp = np.interp(f, f[ok], lp[ok])
+    df = float(f[1] - f[0])
+    smooth = uniform_filter1d(lp, max(1, int(0.04 * f1_hz / df)) | 1, mode="nearest")
+    prom = smooth - median_filter(lp, size=max(3, int(0.5 * f1_hz / df)) | 1, mode="nearest")
+    band = (f > BAND[0] * f1_hz) & (f < BAND[1] * f1_hz)
+    wide = (f > WIDE[0] * f1_hz) & (f < min(WIDE[1] * f1_hz, 0.95 * rate_hz / 2)) & (f > 1.0)
+    out = wide & ~band
+    inside = float(np.max(prom[band])) if band.any() else 0.0
+    if not out.any():
+        return inside, 0.0, math.nan
+    k = int(np.argmax(np.where(out, prom, -np.inf)))
+    return inside, float(prom[k]), float(f[k])
+
+
 def _block_model(ff, f1, z, r, tau, a, floor):
     """ln of the block's spectrum less its smooth part: resonance, echo ripple, patch null."""
     return (-np.log((1 - (ff / f1) ** 2) ** 2 + (2 * z * ff / f1) ** 2)
@@ -178,7 +274,16 @@ def _block_model(ff, f1, z, r, tau, a, floor):
             + np.log(np.sinc(ff * a) ** 2 + floor))  # fmt: skip
 
 
-def fit_block(f, p, f1_hz: float, zeta: float, *, base: bool = True) -> tuple[float, float, str]:
+def band_for(zeta: float, f1_hz: float, rate_hz: float) -> tuple[float, float]:
+    """The band fitted about f_1 (relative): :data:`BAND`, widened to ``±``:data:`WINGS`
+    half-widths ``ζf_1`` where the peak is broad (at most 0.5–1.5 f_1, below 0.95 Nyquist)."""
+    lo = max(min(BAND[0], 1 - WINGS * zeta), 0.5)
+    hi = min(max(BAND[1], 1 + WINGS * zeta), 1.5, 0.95 * rate_hz / 2 / f1_hz)
+    return lo, max(hi, min(BAND[1], 0.95 * rate_hz / 2 / f1_hz))
+
+
+def fit_block(f, p, f1_hz: float, zeta: float, *, base: bool = True,
+              band: tuple[float, float] = BAND) -> tuple[float, float, str]:  # fmt: skip
     """f_1 and ζ of one block's spectrum, from the start ``f1_hz``, ``zeta`` (the record's).
 
     The base's spectrum over the band is a quadratic in ``ln f`` times the echo ripple
@@ -193,7 +298,7 @@ def fit_block(f, p, f1_hz: float, zeta: float, *, base: bool = True) -> tuple[fl
     """
     from scipy.optimize import least_squares
 
-    keep = (f > BAND[0] * f1_hz) & (f < BAND[1] * f1_hz) & (p > 0)
+    keep = (f > band[0] * f1_hz) & (f < band[1] * f1_hz) & (p > 0)
     keep &= line_mask(f, p)
     if keep.sum() < 4 * (ORDER + 7):
         return math.nan, math.nan, "too few bins"
@@ -206,8 +311,8 @@ def fit_block(f, p, f1_hz: float, zeta: float, *, base: bool = True) -> tuple[fl
                              math.exp(th[5]))  # fmt: skip
         return lp - shape - x @ th[6:]
 
-    lo = [BAND[0] * f1_hz, math.log(1e-3), -3.0, ECHO_S[0], 0.0, -12.0] + [-np.inf] * (ORDER + 1)
-    hi = [BAND[1] * f1_hz, math.log(0.5), 3.0, ECHO_S[1], 2 / f1_hz, 2.0] + [np.inf] * (ORDER + 1)
+    lo = [band[0] * f1_hz, math.log(1e-3), -3.0, ECHO_S[0], 0.0, -12.0] + [-np.inf] * (ORDER + 1)
+    hi = [band[1] * f1_hz, math.log(0.5), 3.0, ECHO_S[1], 2 / f1_hz, 2.0] + [np.inf] * (ORDER + 1)
     tau = min(max(tau, ECHO_S[0] * 1.001), ECHO_S[1] * 0.999)
     best = None
     nulls = [*NULLS, 1e3] if base else [1e3]  # the null's place / f_1 (1e3: none)
@@ -231,7 +336,7 @@ def fit_block(f, p, f1_hz: float, zeta: float, *, base: bool = True) -> tuple[fl
         if best is None or r.cost < best.cost:
             best = r
     f1, z = float(best.x[0]), float(math.exp(best.x[1]))  # f_1 and ln ζ are always free
-    inside = BAND[0] * f1_hz * 1.02 < f1 < BAND[1] * f1_hz / 1.02 and 1.1e-3 < z < 0.45
+    inside = band[0] * f1_hz * 1.02 < f1 < band[1] * f1_hz / 1.02 and 1.1e-3 < z < 0.45
     if not inside:
         return f1, z, "no resonance in the band"
     return f1, z, "ok"
@@ -306,7 +411,7 @@ def identify_driving(
     zeta: float,
     *,
     block_s: float = BLOCK_S,
-    min_blocks: int = 4,
+    min_blocks: int = MIN_BLOCKS,
 ) -> DriveFit:
     """f_1 and ζ of a whisker from its driving signals (see the module docstring).
 
@@ -333,28 +438,81 @@ def identify_driving(
         if y.size < 2 * SEGMENT_S * rate_hz:
             continue
         seconds += y.size / rate_hz
+        if not np.all(np.isfinite(y)):
+            raise ValueError(f"{name.split('[')[0]}: holds samples that are not finite")
         spectra.append((name, *block_spectrum(y, rate_hz)))
+    if len(spectra) < min_blocks:
+        return DriveFit("too short", seconds=seconds)
     centre = f1_hz
     # a quick look (a smooth base) centres the band on the whisker's f_1 as it is now
     quick = [fit_block(f, p, centre, zeta, base=False) for _, f, p in spectra]
-    good = [(f1, z) for f1, z, s in quick if s == "ok"]
+    strength = [peak_strength(f, p, centre, f1, z) if s == "ok" else 0.0
+                for (_, f, p), (f1, z, s) in zip(spectra, quick, strict=True)]  # fmt: skip
+    good = [(f1, z) for (f1, z, s), g in zip(quick, strength, strict=True)
+            if s == "ok" and g >= PEAK_MIN]  # fmt: skip
     start = zeta
     if good:  # and starts ζ there (the null and the ripple are searched from it)
         centre, start = (float(np.median(v)) for v in zip(*good, strict=True))
-    fits = [(name, *fit_block(f, p, centre, start)) for name, f, p in spectra]
-    blocks = [{"name": n, "f1_hz": f1, "zeta": z, "status": s} for n, f1, z, s in
-              (fits if spectra else [])]  # fmt: skip
+    band = band_for(start, centre, rate_hz)  # wide enough for a broad peak's wings
+    fits = [(name, *fit_block(f, p, centre, start, band=band)) for name, f, p in spectra]
+    blocks = [{"name": n, "f1_hz": f1, "zeta": z, "status": s, "peak": g}
+              for (n, f1, z, s), g in zip(fits, strength, strict=True)]  # fmt: skip
     good = [b for b in blocks if b["status"] == "ok"]
-    if len(good) < min_blocks:
-        why = "too short" if len(spectra) < min_blocks else "no resonance"
-        return DriveFit(why, blocks=blocks, seconds=seconds)
+    if len(good) < max(min_blocks, len(blocks) / 2):
+        return DriveFit("no resonance", blocks=blocks, seconds=seconds)
     f1, f1_std, f1_dof = combine_blocks([b["f1_hz"] for b in good])
     ln_z, ln_z_std, zeta_dof = combine_blocks([math.log(b["zeta"]) for b in good])
     z = math.exp(ln_z)  # ζ's blocks scatter in proportion (a geometric mean)
+    fit = DriveFit("ok", f1, f1_std, z, math.nan, blocks, seconds, f1_dof, zeta_dof)
     if not (math.isfinite(f1_std) and math.isfinite(ln_z_std)):
-        return DriveFit("too short", blocks=blocks, seconds=seconds)
-    z_std = z * math.hypot(ln_z_std, ZETA_SYSTEMATIC)
-    return DriveFit("ok", f1, f1_std, z, z_std, blocks, seconds, f1_dof, zeta_dof)
+        return replace(fit, status="too short")
+    fit.zeta_std = z * math.hypot(ln_z_std, ZETA_SYSTEMATIC)
+    fit.status = drive_status(fit, spectra, f1_hz, rate_hz)
+    return fit
+
+
+def drive_status(fit: DriveFit, spectra, f1_hz: float, rate_hz: float) -> str:
+    """``ok``, or why a drive's combined value is not a whisker's resonance.
+
+    * ``no resonance``: the drive's peak beats the smooth base by less than
+      :data:`PEAK_MIN` in the median block;
+    * ``identical blocks``: the blocks' values do not scatter at all (one recording given
+      several times): a 1σ of 0 is never reported;
+    * ``no consistent peak``: the blocks' f_1 scatter by more than :data:`SPREAD_MAX` of the
+      peak's half-width (fits to noise, not to one resonance);
+    * ``peak at the band's edge``: f_1 within 3 % of the edge of the band about the record's
+      f_1 (the whisker's resonance may lie beyond it);
+    * ``peak outside the band``: the spectrum's most prominent peak lies outside the band
+      about the record's f_1 and stands out more than the one inside (the whisker changed
+      beyond 0.8–1.25 of its record, or the record is another whisker's).
+    """
+    good = [b for b in fit.blocks if b["status"] == "ok"]
+    if np.median([b["peak"] for b in fit.blocks]) < PEAK_MIN:
+        return "no resonance"
+    f1s = np.array([b["f1_hz"] for b in good])
+    zs = np.array([b["zeta"] for b in good])
+    if np.ptp(f1s) == 0 or np.ptp(zs) == 0 or not (fit.f1_std > 0 and fit.zeta_std > 0):
+        return "identical blocks"
+    inside, outside, _ = peak_elsewhere(spectra, f1_hz, rate_hz)
+    if outside > max(inside, 1.0):
+        return "peak outside the band"
+    if robust_sigma(f1s[inliers(f1s)]) > SPREAD_MAX * fit.zeta * fit.f1_hz:
+        return "no consistent peak"
+    if not (BAND[0] * 1.03 < fit.f1_hz / f1_hz < BAND[1] / 1.03):
+        return "peak at the band's edge"
+    return "ok"
+
+
+def drive_problem(fit: DriveFit) -> str:
+    """A sentence for a drive whose status is not ``ok`` (for the command line)."""
+    return {
+        "too short": "too little driving for a 1-sigma",
+        "no resonance": "no resonance peak stands out of the base's spectrum",
+        "identical blocks": "its blocks are identical (the same recording more than once?)",
+        "no consistent peak": "its blocks' peaks do not agree (noise, or no resonance in the band)",
+        "peak at the band's edge": "f1 lies at the edge of 0.8-1.25 times the record's f1",
+        "peak outside the band": "a stronger peak lies outside 0.8-1.25 times the record's f1",
+    }.get(fit.status, fit.status)
 
 
 def _outliers(blocks) -> set[int]:

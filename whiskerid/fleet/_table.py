@@ -31,14 +31,22 @@ def read_table(path: str | Path) -> list[dict]:
     path = Path(path)
     if not path.exists():
         return []
-    with open(path, newline="", encoding="utf-8") as fh:
-        reader = csv.DictReader(fh)
-        if tuple(reader.fieldnames or ()) != COLUMNS:
-            raise FleetError(
-                f"{path} is not a fleet table (its header is not whiskerid's); "
-                "give another --out folder"
-            )
-        return [_mend(row, n, path.name) for n, row in enumerate(reader, start=2)]
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            reader = csv.DictReader(fh)
+            if tuple(reader.fieldnames or ()) != COLUMNS:
+                raise FleetError(
+                    f"{path} is not a fleet table (its header is not whiskerid's); "
+                    "give another --out folder"
+                )
+            return [_mend(row, n, path.name) for n, row in enumerate(reader, start=2)]
+    except UnicodeDecodeError as err:
+        line = err.object[: err.start].count(b"\n") + 1
+        raise FleetError(
+            f"{path}: line {line} is not UTF-8 text (byte 0x{err.object[err.start]:02x} "
+            "at offset "
+            f"{err.start}); mend or remove the file"
+        ) from None
 
 
 def _mend(row: dict, line: int, name: str) -> dict:
