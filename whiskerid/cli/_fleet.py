@@ -49,6 +49,7 @@ def add_parser(sub) -> None:
     _add_calibrate(fsub)
     _add_drive(fsub)
     _add_check(fsub)
+    _add_simulate(fsub)
 
 
 def _add_calibrate(fsub) -> None:
@@ -393,3 +394,65 @@ def _print_flags(result, *, quiet: bool = False) -> None:
         return
     whiskers = len({f["whisker"] for f in result.flags})
     print(f"{len(result.flags)} flag(s) on {whiskers} whisker(s)", file=sys.stderr)
+
+
+def _add_simulate(fsub) -> None:
+    p = fsub.add_parser(
+        "simulate",
+        help="write a simulated fleet (plucks per whisker and session) to try the others on",
+        description=(
+            "Write a simulated fleet in the layout 'fleet calibrate' reads: ROOT/whisker-NNN/"
+            "whisker.toml and ROOT/whisker-NNN/session-NN/pluck-N.csv (ADS1115 codes at "
+            "--rate), each whisker's material and damping off its record's and varying a "
+            "little from session to session; --damaged of them change lastingly (zeta x 1.5 "
+            "or f1 x 0.97, alternately) from a random session after the first --baseline. "
+            "--truth writes what was simulated (CSV: whisker, session, f1_hz, zeta, damaged)."
+        ),
+        formatter_class=HelpFormatter,
+    )
+    p.add_argument("root", type=Path, metavar="ROOT", help="folder to write (new or empty)")
+    p.add_argument("--whiskers", type=int, default=3, help="number of whiskers")
+    p.add_argument("--sessions", type=int, default=4, help="sessions per whisker")
+    p.add_argument("--plucks", type=int, default=2, help="plucks per session")
+    p.add_argument("--damaged", type=int, default=1, help="whiskers that change")
+    p.add_argument("--baseline", type=int, default=2, help="sessions before any change")
+    p.add_argument("--rate", type=float, default=860.0, help="sampling rate (Hz)")
+    p.add_argument("--seed", type=int, default=0, help="seed of everything drawn")
+    p.add_argument("--truth", type=Path, help="also write the truth to this CSV file")
+    p.add_argument("--force", action="store_true", help="write into a non-empty ROOT")
+    p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    p.set_defaults(func=_cmd_simulate)
+
+
+def _cmd_simulate(args) -> dict:
+    """Write the fleet and its truth; returns the JSON summary."""
+    import math
+
+    counts = {"--whiskers": (args.whiskers, 1, 100), "--sessions": (args.sessions, 1, 100),
+              "--plucks": (args.plucks, 1, 20), "--damaged": (args.damaged, 0, args.whiskers),
+              "--baseline": (args.baseline, 1, args.sessions)}  # fmt: skip
+    for flag, (v, lo, hi) in counts.items():
+        if not lo <= v <= hi:
+            raise CommandError(f"{flag} {v}: give a whole number from {lo} to {hi}")
+    if not (math.isfinite(args.rate) and 100 <= args.rate <= 860):
+        raise CommandError(f"--rate {args.rate:g}: give a rate from 100 to 860 Hz (the ADS1115)")
+    check_outputs({"ROOT": args.root, "--truth": args.truth}, {}, force=args.force,
+                  folders=("ROOT",))  # fmt: skip
+    from ..fleet import simulate_fleet
+    from ..io import atomic_write
+
+    truth = simulate_fleet(args.root, whiskers=args.whiskers, sessions=args.sessions,
+                           plucks=args.plucks, damaged=args.damaged, baseline=args.baseline,
+                           rate_hz=args.rate, seed=args.seed)  # fmt: skip
+    if args.truth:
+        lines = ["whisker,session,f1_hz,zeta,damaged"] + [
+            f"{r['whisker']},{r['session']},{r['f1_hz']:.6g},{r['zeta']:.6g},{int(r['damaged'])}"
+            for r in truth.sessions
+        ]
+        atomic_write(args.truth, "\n".join(lines) + "\n")
+    say(
+        f"wrote {args.root}: {args.whiskers} whiskers x {args.sessions} sessions x "
+        f"{args.plucks} plucks" + (f"; the truth to {args.truth}" if args.truth else "")
+    )
+    return {"root": str(args.root), "truth": str(args.truth) if args.truth else None,
+            "damage": {w: list(d) for w, d in truth.damage.items()}}  # fmt: skip
