@@ -1,0 +1,92 @@
+"""What a new user types wrong is refused where it enters (exit 2, one line naming the flag
+and the value), units are SI, and a clipped simulation says so."""
+
+import json
+
+import numpy as np
+import pytest
+
+from whiskerid.cli import main
+from whiskerid.io import Recording, parse_mass, write_csv
+
+PAPER = "fits/paper-whisker.toml"
+
+
+@pytest.fixture(autouse=True)
+def _repo_root(monkeypatch, request):
+    monkeypatch.chdir(request.config.rootpath)
+
+
+@pytest.fixture
+def tree(tmp_path):
+    t = np.arange(400) / 200.0
+    rec = Recording(t, {"adc": 1000 * np.exp(-t) * np.sin(2 * np.pi * 46 * t)})
+    write_csv(tmp_path / "a.csv", rec)
+    write_csv(tmp_path / "b.csv", rec)
+    (tmp_path / "data" / "brick").mkdir(parents=True)
+    write_csv(tmp_path / "data" / "brick" / "r1.csv", rec)
+    return tmp_path
+
+
+REC = "record {d}/x.csv --emulate pluck --fast --duration 1 --added-mass "
+CAL = "calibrate {d}/a.csv --whisker " + PAPER + " --out {d}/o.toml "
+# Each row: a command line, and the words its one-line refusal must hold.
+BAD = [
+    (REC + "520", ["--added-mass", "520 kg", "0.52g"]),
+    (REC + "1e400g", ["--added-mass", "finite"]),
+    (REC + "1kg±0.1g", ["--added-mass", "plausible"]),
+    (REC + "1g", ["--added-mass", "uncertainty"]),
+    (CAL.replace("a.csv", "a.csv {d}/b.csv")
+     + "--added-mass {d}/b.csv=0.5g±0.01g --added-mass {d}/b.csv=0.6g±0.01g",
+     ["--added-mass", "twice"]),
+    (CAL + "--f1-start 1e9", ["--f1-start", "1e+09"]),
+    (CAL + "--f1-start nan", ["--f1-start", "nan"]),
+    ("analyze {d}/data --segment inf", ["--segment", "inf"]),
+    ("analyze {d}/data --segment 0.001", ["--segment", "0.001"]),
+    ("analyze {d}/data --rate 1e7", ["--rate", "1e+07"]),
+    ("analyze {d}/data --rate 0", ["--rate", "0"]),
+    ("analyze {d}/data --rate nan", ["--rate", "nan"]),
+    ("analyze {d}/data --perturbation-hz inf", ["--perturbation-hz", "inf"]),
+    ("analyze {d}/data --perturbation-hz nan", ["--perturbation-hz", "nan"]),
+    ("analyze {d}/data --per-rev inf", ["--per-rev", "inf"]),
+    ("analyze {d}/data --per-rev 2 --wheel-diameter 1e-300", ["--wheel-diameter", "1e-300"]),
+    ("analyze {d}/data --channel nope", ["--channel", "nope", "adc"]),
+    ("simulate --excitation sine --cubic 1e4 --out {d}/s.csv", ["--cubic", "--excitation decay"]),
+    ("simulate --excitation decay --cubic nan --out {d}/s.csv", ["--cubic", "nan"]),
+    ("fleet simulate {d}/fleet --whiskers 0", ["--whiskers", "0"]),
+    ("fleet simulate {d}/fleet --rate 1e6", ["--rate", "1e+06"]),
+    ("fleet simulate {d}/fleet --damaged 5 --whiskers 3", ["--damaged", "5"]),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(("argv", "words"), BAD, ids=[f"{b[0].split()[0]}{i}" for i, b in
+                                                      enumerate(BAD)])  # fmt: skip
+def test_a_bad_value_is_refused_naming_it(tree, capsys, argv, words):
+    assert main([*argv.format(d=tree).split(), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "Traceback" not in err, err
+    for w in words:
+        assert w in err, (w, err)
+    assert not (tree / "x.csv").exists() and not (tree / "fleet").exists()
+
+
+@pytest.mark.parametrize(
+    ("text", "kg"),
+    [("520mg", 5.2e-4), ("0.52g", 5.2e-4), ("5.2e-4kg", 5.2e-4), ("0.00052", 5.2e-4),
+     ("1g±0.01g", 1e-3)],
+)  # fmt: skip
+def test_a_bare_mass_is_kilograms_and_units_are_read(text, kg):
+    assert parse_mass(text)[0] == pytest.approx(kg)
+
+
+def test_a_clipped_simulation_warns_and_says_how_much_to_scale(tmp_path, capsys):
+    argv = ["simulate", "--excitation", "sine", "--observable", "adc", "--duration", "1",
+            "--json", "--quiet", "--out"]  # fmt: skip
+    assert main([*argv, str(tmp_path / "ok.csv"), "--hb", "1e-4"]) == 0
+    out = capsys.readouterr()
+    assert "clipped" not in json.loads(out.out) and "warning" not in out.err
+    assert main([*argv, str(tmp_path / "rails.csv"), "--hb", "0.2"]) == 0
+    out = capsys.readouterr()
+    clipped = json.loads(out.out)["clipped"]
+    assert clipped["fraction"] > 0.3 and 0 < clipped["scale"] < 0.5
+    assert "warning" in out.err and "--hb" in out.err and f"{clipped['scale']:.2g}" in out.err
