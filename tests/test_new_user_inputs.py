@@ -90,3 +90,22 @@ def test_a_clipped_simulation_warns_and_says_how_much_to_scale(tmp_path, capsys)
     clipped = json.loads(out.out)["clipped"]
     assert clipped["fraction"] > 0.3 and 0 < clipped["scale"] < 0.5
     assert "warning" in out.err and "--hb" in out.err and f"{clipped['scale']:.2g}" in out.err
+
+
+def test_no_xla_banner_reaches_a_user_and_a_slow_compile_gets_a_note(tmp_path):
+    """XLA's own log is off on the command line; a compile longer than the threshold (here
+    1 ms, so that every compile counts) gets the project's one-line note instead."""
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "WHISKERID_SLOW_COMPILE_NOTE_S": "0.001"}
+    env.pop("TF_CPP_MIN_LOG_LEVEL", None)
+    done = subprocess.run(
+        [sys.executable, "-m", "whiskerid.cli", "simulate", "--duration", "0.5", "--quiet",
+         "--out", str(tmp_path / "s.csv")],
+        env=env, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert "note: compiling" in done.stderr and "compilation cache" in done.stderr
+    assert "Very slow compile" not in done.stderr and "E0000" not in done.stderr
