@@ -54,6 +54,9 @@ BAD = [
     ("simulate --excitation sine --cubic 1e4 --out {d}/s.csv", ["--cubic", "--excitation decay"]),
     ("simulate --excitation decay --cubic nan --out {d}/s.csv", ["--cubic", "nan"]),
     ("fleet simulate {d}/fleet --whiskers 0", ["--whiskers", "0"]),
+    ("dataset synth --out {d}/syn --contact --duration 1e9", ["--duration", "1e+09"]),
+    ("dataset synth --out {d}/syn --duration nan", ["--duration", "nan"]),
+    ("dataset synth --out {d}/syn --runs 0", ["--runs", "0"]),
     ("fleet simulate {d}/fleet --rate 1e6", ["--rate", "1e+06"]),
     ("fleet simulate {d}/fleet --damaged 5 --whiskers 3", ["--damaged", "5"]),
 ]  # fmt: skip
