@@ -72,3 +72,21 @@ def test_the_calibration_figure_has_no_clipped_title_or_overlapping_ticks(tmp_pa
     (fit,) = [ln for ln in top[0].get_lines() if ln.get_label() == "fit"]
     assert fit.get_linestyle() == "--" and fit.get_color() == "k"
     assert fit.get_zorder() > max(ln.get_zorder() for ln in top[0].get_lines() if ln is not fit)
+
+
+def test_the_fleet_figure_flags_only_the_parameter_that_changed(tmp_path, monkeypatch):
+    from whiskerid.plot import _fleet
+
+    figs = []
+    monkeypatch.setattr(_fleet, "_save", lambda fig, path: figs.append(fig) or path)
+    sessions = [f"s{i}" for i in range(5)]
+    values = {"f1_hz": np.full(5, 46.0), "zeta": np.array([0.04, 0.04, 0.04, 0.06, 0.06])}
+    errors = {"f1_hz": np.full(5, 0.01), "zeta": np.full(5, 0.001)}
+    _fleet.plot_fleet_history(tmp_path / "w.png", "whisker-001", sessions, values, errors, {},
+                              baseline=2, centre={"f1_hz": 46.0, "zeta": 0.04},
+                              band={"f1_hz": 0.05, "zeta": 0.005},
+                              flagged={"f1_hz": [], "zeta": ["s3", "s4"]})  # fmt: skip
+    (fig,) = figs
+    legends = {ax.get_ylabel(): [t.get_text() for t in ax.get_legend().get_texts()]
+               for ax in fig.axes}  # fmt: skip
+    assert "flagged" not in legends["f1 (Hz)"] and "flagged" in legends["zeta"]

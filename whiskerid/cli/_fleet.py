@@ -340,7 +340,7 @@ def _cmd_check(args) -> dict:
             plots.append(str(plot_fleet_history(
                 out / f"{name.replace(' (', '-').rstrip(')')}.png", name, h.sessions, h.values,
                 h.errors, h.plucks, baseline=h.baseline, centre=h.centre, band=h.band,
-                flagged=h.flagged, began=h.began,
+                flagged=_flagged_per_parameter(name, h, result.flags), began=h.began,
             )))  # fmt: skip
     _print_flags(result, quiet=args.quiet)
     return {
@@ -354,6 +354,15 @@ def _cmd_check(args) -> dict:
         "whiskers": len(result.histories),
         "flagged_whiskers": len({f["whisker"] for f in result.flags}),
     }
+
+
+def _flagged_per_parameter(name: str, history, flags: list[dict]) -> dict[str, list[str]]:
+    """Per parameter of ``history``, the sessions flagged for it (a failed fit, ``fit``,
+    counts for every one): the figure marks a change on the parameter that changed."""
+    mine = [f for f in flags if f["whisker"] == name.split(" (")[0]
+            and f["session"] in history.flagged]  # fmt: skip
+    return {p: sorted({f["session"] for f in mine if f["parameter"] in (p, "fit")})
+            for p in history.values}  # fmt: skip
 
 
 _FLAG_COLUMNS = ("whisker", "source", "session", "parameter", "value", "baseline",
