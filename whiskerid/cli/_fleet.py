@@ -5,7 +5,15 @@ import sys
 from pathlib import Path
 
 from .._choices import OBSERVABLES, PINS, SOLVERS
-from ._common import QUIET_HELP, WATCH, CommandError, HelpFormatter, check_outputs, say
+from ._common import (
+    FORCE_HELP,
+    QUIET_HELP,
+    WATCH,
+    CommandError,
+    HelpFormatter,
+    check_outputs,
+    say,
+)
 
 _LAYOUT = (
     "ROOT/<whisker-id>/<session>/<recordings>.csv|.npy|.npz, one folder per whisker and per "
@@ -428,7 +436,7 @@ def _add_simulate(fsub) -> None:
     p.add_argument("--rate", type=float, default=860.0, help="sampling rate (Hz)")
     p.add_argument("--seed", type=int, default=0, help="seed of everything drawn")
     p.add_argument("--truth", type=Path, help="also write the truth to this CSV file")
-    p.add_argument("--force", action="store_true", help="write into a non-empty ROOT")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.set_defaults(func=_cmd_simulate)
 
