@@ -7,6 +7,7 @@ from .._choices import SPEEDS_MPS, TERRAINS
 from ._common import (
     FORCE_HELP,
     QUIET_HELP,
+    WATCH,
     CommandError,
     HelpFormatter,
     check_outputs,
@@ -91,19 +92,20 @@ def run(args) -> dict:
     if not 0 < args.preload < 20:
         raise CommandError(f"--preload {args.preload:g} mm: give a depth between 0 and 20 mm")
     record = record_or_paper(args.whisker)
-    try:
-        paths = synthesize_dataset(args.out, record=record, terrains=tuple(args.terrains),
-                                   speeds=tuple(args.speeds), runs=args.runs,
-                                   duration_s=args.duration, seed=args.seed,
-                                   replace_synthetic=args.force,
-                                   channels=args.channels, contact=args.contact,
-                                   preload_m=args.preload * 1e-3,
-                                   progress=show_progress(args), resume=args.resume)  # fmt: skip
-    except KeyboardInterrupt:
-        kept = len(list(args.out.glob("*/*.csv"))) if args.out.is_dir() else 0
-        say(f"kept {kept} finished recording(s) in {args.out}; the same command with --resume "
-            "simulates the rest")  # fmt: skip
-        raise
+
+    def kept() -> str | None:  # said in the one line of an interrupt
+        n = len(list(args.out.glob("*/*.csv"))) if args.out.is_dir() else 0
+        return (f"kept (complete): {n} finished recording(s) in {args.out}; the same command "
+                "with --resume simulates the rest") if n else None  # fmt: skip
+
+    WATCH.notes.append(kept)
+    paths = synthesize_dataset(args.out, record=record, terrains=tuple(args.terrains),
+                               speeds=tuple(args.speeds), runs=args.runs,
+                               duration_s=args.duration, seed=args.seed,
+                               replace_synthetic=args.force,
+                               channels=args.channels, contact=args.contact,
+                               preload_m=args.preload * 1e-3,
+                               progress=show_progress(args), resume=args.resume)  # fmt: skip
     say(f"wrote {len(paths)} recordings to {args.out}")
     return {"out": str(args.out), "recordings": len(paths), "terrains": args.terrains,
             "speeds_mps": args.speeds, "runs": args.runs, "duration_s": args.duration,
