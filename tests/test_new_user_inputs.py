@@ -2,6 +2,7 @@
 and the value), units are SI, and a clipped simulation says so."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -112,3 +113,14 @@ def test_no_xla_banner_reaches_a_user_and_a_slow_compile_gets_a_note(tmp_path):
     assert done.returncode == 0, done.stderr
     assert "note: compiling" in done.stderr and "compilation cache" in done.stderr
     assert "Very slow compile" not in done.stderr and "E0000" not in done.stderr
+
+
+def test_a_record_with_no_hall_gain_is_refused_naming_the_key(tmp_path, capsys):
+    text = Path(PAPER).read_text()
+    key = next(line for line in text.splitlines() if line.startswith("hall_gain_v_per_m"))
+    (tmp_path / "w.toml").write_text(text.replace(key, "hall_gain_v_per_m = 0.0"))
+    argv = ["simulate", "--whisker", str(tmp_path / "w.toml"), "--observable", "adc", "--out",
+            str(tmp_path / "s.csv"), "--quiet"]  # fmt: skip
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "hall_gain_v_per_m = 0.0" in err and "ZeroDivision" not in err
