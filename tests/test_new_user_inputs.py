@@ -124,3 +124,21 @@ def test_a_record_with_no_hall_gain_is_refused_naming_the_key(tmp_path, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert "hall_gain_v_per_m = 0.0" in err and "ZeroDivision" not in err
+
+
+def test_fleet_check_refuses_a_session_given_twice_and_bytes_that_are_not_text(tmp_path, capsys):
+    from whiskerid.fleet import write_table
+
+    fleet = tmp_path / "FLEET"
+    fleet.mkdir()
+    rows = [{"whisker": "w0", "session": f"2026-11-2{i}", "f1_hz": "46.0", "zeta": "0.04",
+             "status": "ok"} for i in range(4)]  # fmt: skip
+    write_table(fleet / "fleet.csv", [*rows, {**rows[2], "f1_hz": "47.5"}])
+    assert main(["fleet", "check", str(fleet), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "fleet.csv" in err and "session 2026-11-22" in err and "lines 4 and 5" in err
+    write_table(fleet / "fleet.csv", rows)
+    (fleet / "health.csv").write_bytes((fleet / "fleet.csv").read_bytes() + b"w0,caf\xe9\n")
+    assert main(["fleet", "check", str(fleet), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "health.csv" in err and "UTF-8" in err and "Traceback" not in err

@@ -325,11 +325,20 @@ def _cmd_check(args) -> dict:
                   HEALTH_NAME}, force=True, folders=("--out",))  # fmt: skip
     from ..fleet import FleetError, check_fleet, read_table
 
-    try:
-        rows = read_table(table)
-        rows += [{**r, "source": "drive"} for r in read_table(args.fleet / HEALTH_NAME)]
-    except FleetError as err:
-        raise CommandError(str(err)) from None
+    rows = []
+    for path, source in ((table, None), (args.fleet / HEALTH_NAME, "drive")):
+        try:
+            got = read_table(path)
+        except FleetError as err:
+            raise CommandError(str(err)) from None
+        except UnicodeDecodeError as err:
+            raise CommandError(
+                f"{path}: byte {err.start} is not UTF-8 text; the table was edited or "
+                "damaged: restore it or fit it again"
+            ) from None
+        if source is None:  # a health log may hold several drives of one session
+            _refuse_duplicate_sessions(path, got)
+        rows += got if source is None else [{**r, "source": source} for r in got]
     result = check_fleet(
         rows,
         baseline=args.baseline,
@@ -362,6 +371,20 @@ def _cmd_check(args) -> dict:
         "whiskers": len(result.histories),
         "flagged_whiskers": len({f["whisker"] for f in result.flags}),
     }
+
+
+def _refuse_duplicate_sessions(path: Path, rows: list[dict]) -> None:
+    """One row per whisker and session (a joint fit of its plucks): two rows of one session
+    would be read as a change between them."""
+    seen: dict[tuple, int] = {}
+    for line, row in enumerate(rows, start=2):
+        key = (row.get("whisker"), row.get("session"))
+        if key in seen:
+            raise CommandError(
+                f"{path}: lines {seen[key]} and {line} are both whisker {key[0]}, session "
+                f"{key[1]}; keep one row per session (or fit the session again)"
+            )
+        seen[key] = line
 
 
 def _flagged_per_parameter(name: str, history, flags: list[dict]) -> dict[str, list[str]]:
