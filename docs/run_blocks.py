@@ -117,9 +117,16 @@ def run_page(page: str, keep: Path | None = None, say=print) -> list[tuple[Block
             if b.skip:
                 say(f"{page} #{b.number} (line {b.line}) skipped: {b.skip}")
                 continue
+            text = _SETUP.sub("", b.text)
+            if "-m venv" in text or "pip install" in text:
+                # .venv here is the environment this runs in: never rebuild or reinstall it
+                why = "installs into .venv: mark the block <!-- ci: skip (why) -->"
+                failures.append((b, 0.0, why))
+                say(f"{page} #{b.number} (line {b.line}) FAILED: {why}")
+                break
             start = time.perf_counter()
             done = subprocess.run(
-                ["bash", "-euo", "pipefail", "-c", _SETUP.sub("", b.text)],
+                ["bash", "-euo", "pipefail", "-c", text],
                 cwd=where,
                 env=env,
                 capture_output=True,

@@ -55,3 +55,10 @@ def test_every_command_of_the_page_runs(page):
     lines = []
     failures = run_blocks.run_page(page, say=lines.append)
     assert not failures, "\n".join(lines)
+
+
+def test_a_block_that_would_reinstall_the_environment_is_refused(tmp_path, monkeypatch):
+    (tmp_path / "p.md").write_text('```bash\n.venv/bin/pip install -e ".[docs]"\n```\n')
+    monkeypatch.setattr(run_blocks, "ROOT", tmp_path)
+    failures = run_blocks.run_page("p.md", say=lambda *a: None)
+    assert len(failures) == 1 and "ci: skip" in failures[0][2]
