@@ -492,3 +492,20 @@ def test_a_real_clock_simulation_plays_its_terrain_to_the_end(tiny_model, tmp_pa
     assert "sensor-fault" not in out["label_counts"], out
     assert out["sampling"]["process"] is True  # played by the sampling process
     assert out["samples"] >= 0.995 * 8 * 200 - 2, out
+
+
+def test_a_replay_shorter_than_the_duration_ends_at_the_end_of_its_file(tiny_model, tmp_path,
+                                                                         capsys):  # fmt: skip
+    """Past a replayed file's end the chip would hold its last value, a frozen sensor to the
+    window checks: the stream stops at the end of the file and says so, with no fault."""
+    rec = tmp_path / "brick.csv"
+    assert main(["record", str(rec), "--emulate", "brick", "--fast", "--duration", "4"]) == 0
+    capsys.readouterr()
+    argv = ["stream", "--model", str(tiny_model), "--replay", str(rec), "--fast", "--duration",
+            "30", "--compile-cache", "none", "--json"]  # fmt: skip
+    assert main(argv) == 0
+    captured = capsys.readouterr()
+    out = json.loads(captured.out)
+    assert "end of file" in captured.err and "--duration 30" in captured.err
+    assert "fault" not in json.dumps(out.get("labels", {})) and "stuck" not in captured.err
+    assert out["windows"] <= 8, out  # windows of 4 s of samples, not 30

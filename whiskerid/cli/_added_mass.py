@@ -10,7 +10,8 @@ from pathlib import Path
 ADDED_MASS_HELP = (
     "a known mass clipped to the whisker's tip for recording FILE (FILE=MASS, e.g. "
     "loaded.csv=0.52g±0.01g or =520mg+-10mg; repeat for several files). Without a stated "
-    "1-sigma, half a unit of the last digit written. A recording's added_mass_kg (and "
+    "1-sigma, half a unit of the last digit written; a number without a unit is kg. A "
+    "recording's added_mass_kg (and "
     "added_mass_std_kg) metadata does the same. Plucks with and without the mass determine "
     "EI and rho a (so C) separately: the added-mass method"
 )
@@ -55,6 +56,11 @@ def stated_masses(specs, paths: list[Path], command_error) -> list[tuple[float, 
             raise command_error(
                 f"--added-mass {spec!r}: {file} is not one of the recordings given; name one "
                 "of them"
+            )
+        if i in named:
+            raise command_error(
+                f"--added-mass {spec!r}: {paths[i]} has a mass already (the flag names it "
+                "twice); give each recording one mass"
             )
         try:
             out[i] = parse_mass(mass)

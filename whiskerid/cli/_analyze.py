@@ -67,12 +67,23 @@ def run(args) -> dict:
 
     check_outputs({"--out": args.out, "--plot": args.plot}, {"DATASET": args.dataset},
                   force=args.force)  # fmt: skip
-    if not args.segment > 0 or args.components < 1:
-        raise CommandError("--segment must be positive and --components at least 1")
-    for name, value in (("--perturbation-hz", args.perturbation_hz), ("--per-rev", args.per_rev),
-                        ("--wheel-diameter", args.wheel_diameter)):  # fmt: skip
-        if value is not None and not value > 0:
-            raise CommandError(f"{name} {value:g}: give a positive number")
+    import math
+
+    if not (math.isfinite(args.segment) and 0.05 <= args.segment <= 600) or args.components < 1:
+        raise CommandError(
+            f"--segment {args.segment:g} s, --components {args.components}: give a segment "
+            "from 0.05 to 600 s and at least 1 component"
+        )
+    if args.rate is not None and not (math.isfinite(args.rate) and 1 <= args.rate <= 10_000):
+        raise CommandError(f"--rate {args.rate:g}: give a rate from 1 to 10000 Hz")
+    # Plausible ranges: a perturbation a whisker can record, a wheel a robot can have.
+    for name, value, lo, hi in (("--perturbation-hz", args.perturbation_hz, 1e-3, 1e4),
+                                ("--per-rev", args.per_rev, 1e-3, 1e4),
+                                ("--wheel-diameter", args.wheel_diameter, 1e-3, 10.0)):  # fmt: skip
+        if value is not None and not (math.isfinite(value) and lo <= value <= hi):
+            raise CommandError(f"{name} {value:g}: give a number from {lo:g} to {hi:g}")
+    if args.channel is not None:
+        _check_channel(args.dataset, args.channel, args.time_col)
     if not 0 < args.alpha < 0.5:
         raise CommandError(f"--alpha {args.alpha:g}: give a significance level in (0, 0.5)")
     res = analyze_dataset(args.dataset, channel=args.channel, segment_s=args.segment,
@@ -93,3 +104,24 @@ def run(args) -> dict:
         plot_sidebands(args.plot, res)
         say(f"wrote {args.plot}")
     return res
+
+
+def _check_channel(dataset: Path, channel: str, time_col: str) -> None:
+    """``--channel`` names a signal column of the dataset's first CSV recording (NPY files
+    have one column, whatever its name)."""
+    from ..io import RecordingError, read_recording
+    from ._common import CommandError
+
+    first = next(iter(sorted(Path(dataset).glob("*/*.csv"))), None)
+    if first is None:
+        return
+    try:
+        rec = read_recording(first)
+    except (RecordingError, OSError, ValueError):
+        return  # the analysis names the file and what is wrong with it
+    columns = [c for c in rec.columns if c != time_col]
+    if channel not in columns:
+        raise CommandError(
+            f"--channel {channel!r}: {first} has no such column; its signal columns are "
+            f"{', '.join(columns) or 'none'}"
+        )

@@ -21,6 +21,21 @@ _CACHE_ALL = {
 }
 
 
+#: XLA's C++ log level for the command line: 3 keeps its errors and warnings (the "Very slow
+#: compile?" banner is one) off the terminal; what goes wrong still arrives as a Python error,
+#: and a slow compile gets the project's own note (whiskerid._jax_setup).
+_XLA_LOG_LEVEL = "3"
+#: One compilation longer than this (s) gets that note.
+SLOW_COMPILE_S = 20.0
+
+
+def quiet_xla() -> None:
+    """Before JAX starts: XLA's own log off (unless the user set its level), the project's
+    note on a slow compile on."""
+    os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", _XLA_LOG_LEVEL)
+    os.environ.setdefault("WHISKERID_SLOW_COMPILE_NOTE_S", f"{SLOW_COMPILE_S:g}")
+
+
 def enable_compile_cache() -> Path | None:
     """Point JAX's persistent compilation cache at :func:`cache_dir` (before JAX starts).
 

@@ -207,6 +207,10 @@ def _cmd_calibrate(args, command_error, parser) -> dict:
             f"--modulus-tolerance {args.modulus_tolerance!r} must be a relative 1-sigma in "
             "[0, 1), e.g. 0.05 for 5 %"
         )
+    if args.f1_start is not None and not (
+        math.isfinite(args.f1_start) and 0.01 <= args.f1_start <= 1e4
+    ):
+        raise command_error(f"--f1-start {args.f1_start:g}: give a frequency from 0.01 to 10000 Hz")
     if args.free_modes:
         _check_free_modes(args, command_error)
     record = load_record(args.whisker)

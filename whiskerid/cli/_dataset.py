@@ -1,11 +1,13 @@
 """``whiskerid dataset synth``: labelled recordings of simulated terrains."""
 
+import math
 from pathlib import Path
 
 from .._choices import SPEEDS_MPS, TERRAINS
 from ._common import (
     FORCE_HELP,
     QUIET_HELP,
+    WATCH,
     CommandError,
     HelpFormatter,
     check_outputs,
@@ -63,6 +65,10 @@ def add_parser(sub) -> None:
     s.add_argument("--preload", type=float, default=1.0, metavar="MM",
                    help="with --contact: how far the undeformed tip would sink into the mean "
                    "ground (mm): sets the static contact force")  # fmt: skip
+    s.add_argument("--resume", action="store_true",
+                   help="finish a synth that was stopped (Ctrl-C, SIGTERM): keep the "
+                   "recordings it finished into --out with the same settings and simulate "
+                   "the rest")  # fmt: skip
     s.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     s.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     s.set_defaults(func=run)
@@ -76,20 +82,30 @@ def run(args) -> dict:
     # replaces only its own recordings), so here: no output inside an input, a writable place.
     check_outputs({"--out": args.out}, {"--whisker": args.whisker}, force=True,
                   folders=("--out",))  # fmt: skip
-    if args.runs < 1 or args.duration <= 0:
-        raise CommandError("--runs must be >= 1 and --duration > 0")
+    if not 1 <= args.runs <= 10_000:
+        raise CommandError(f"--runs {args.runs}: give a whole number from 1 to 10000")
+    # An hour per recording at most: 1e9 s would need terabytes before the first is written.
+    if not (math.isfinite(args.duration) and 0 < args.duration <= 3600):
+        raise CommandError(f"--duration {args.duration:g} s: give a length from 2 to 3600 s")
     if args.contact and args.channels != 1:
         raise CommandError("--contact simulates one Hall sensor: drop --channels 2")
     if not 0 < args.preload < 20:
         raise CommandError(f"--preload {args.preload:g} mm: give a depth between 0 and 20 mm")
     record = record_or_paper(args.whisker)
+
+    def kept() -> str | None:  # said in the one line of an interrupt
+        n = len(list(args.out.glob("*/*.csv"))) if args.out.is_dir() else 0
+        return (f"kept (complete): {n} finished recording(s) in {args.out}; the same command "
+                "with --resume simulates the rest") if n else None  # fmt: skip
+
+    WATCH.notes.append(kept)
     paths = synthesize_dataset(args.out, record=record, terrains=tuple(args.terrains),
                                speeds=tuple(args.speeds), runs=args.runs,
                                duration_s=args.duration, seed=args.seed,
                                replace_synthetic=args.force,
                                channels=args.channels, contact=args.contact,
                                preload_m=args.preload * 1e-3,
-                               progress=show_progress(args))  # fmt: skip
+                               progress=show_progress(args), resume=args.resume)  # fmt: skip
     say(f"wrote {len(paths)} recordings to {args.out}")
     return {"out": str(args.out), "recordings": len(paths), "terrains": args.terrains,
             "speeds_mps": args.speeds, "runs": args.runs, "duration_s": args.duration,

@@ -30,10 +30,28 @@ def add_parser(sub) -> None:
     p.set_defaults(func=run)
 
 
+# Written first into --out: a later demo into the same folder recognises its own output by it
+# and replaces it (the README's main command works every time); a folder without it is
+# refused unless --force, so the demo never writes over anything else.
+MARKER = ".whiskerid-demo"
+
+
 def run(args) -> dict:
     """Run every stage of the demo; returns its JSON summary (and prints a short one on
     stdout without ``--json``)."""
-    check_outputs({"--out": args.out}, {}, force=args.force, folders=("--out",))
+    out = Path(args.out)
+    own = out.is_dir() and (out / MARKER).is_file()
+    check_outputs(
+        {"--out": out},
+        {},
+        force=args.force or own,
+        folders=("--out",),
+        exists_hint=f"pass --force to write into it (a folder the demo wrote has {MARKER} in it)",
+    )
+    out.mkdir(parents=True, exist_ok=True)
+    (out / MARKER).write_text(
+        "This folder was written by `whiskerid demo`; a later demo into it replaces its files.\n"
+    )
     from ._demo_stages import run_demo, summary_lines
 
     quiet = not show_progress(args)

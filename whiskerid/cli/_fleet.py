@@ -6,7 +6,15 @@ import sys
 from pathlib import Path
 
 from .._choices import OBSERVABLES, PINS, SOLVERS
-from ._common import QUIET_HELP, WATCH, CommandError, HelpFormatter, check_outputs, say
+from ._common import (
+    FORCE_HELP,
+    QUIET_HELP,
+    WATCH,
+    CommandError,
+    HelpFormatter,
+    check_outputs,
+    say,
+)
 
 _LAYOUT = (
     "ROOT/<whisker-id>/<session>/<recordings>.csv|.npy|.npz, one folder per whisker and per "
@@ -50,6 +58,7 @@ def add_parser(sub) -> None:
     _add_calibrate(fsub)
     _add_drive(fsub)
     _add_check(fsub)
+    _add_simulate(fsub)
 
 
 def _add_calibrate(fsub) -> None:
@@ -375,11 +384,20 @@ def _cmd_check(args) -> dict:
                   HEALTH_NAME}, force=True, folders=("--out",))  # fmt: skip
     from ..fleet import FleetError, check_fleet, read_table
 
-    try:
-        rows = read_table(table)
-        rows += [{**r, "source": "drive"} for r in read_table(args.fleet / HEALTH_NAME)]
-    except FleetError as err:
-        raise CommandError(str(err)) from None
+    rows = []
+    for path, source in ((table, None), (args.fleet / HEALTH_NAME, "drive")):
+        try:
+            got = read_table(path)
+        except FleetError as err:
+            raise CommandError(str(err)) from None
+        except UnicodeDecodeError as err:
+            raise CommandError(
+                f"{path}: byte {err.start} is not UTF-8 text; the table was edited or "
+                "damaged: restore it or fit it again"
+            ) from None
+        if source is None:  # a health log may hold several drives of one session
+            _refuse_duplicate_sessions(path, got)
+        rows += got if source is None else [{**r, "source": source} for r in got]
     result = check_fleet(
         rows,
         baseline=args.baseline,
@@ -398,7 +416,7 @@ def _cmd_check(args) -> dict:
             plots.append(str(plot_fleet_history(
                 out / f"{name.replace(' (', '-').rstrip(')')}.png", name, h.sessions, h.values,
                 h.errors, h.plucks, baseline=h.baseline, centre=h.centre, band=h.band,
-                flagged=h.flagged, began=h.began,
+                flagged=_flagged_per_parameter(name, h, result.flags), began=h.began,
             )))  # fmt: skip
     _print_flags(result, quiet=args.quiet)
     return {
@@ -412,6 +430,29 @@ def _cmd_check(args) -> dict:
         "whiskers": len(result.histories),
         "flagged_whiskers": len({f["whisker"] for f in result.flags}),
     }
+
+
+def _refuse_duplicate_sessions(path: Path, rows: list[dict]) -> None:
+    """One row per whisker and session (a joint fit of its plucks): two rows of one session
+    would be read as a change between them."""
+    seen: dict[tuple, int] = {}
+    for line, row in enumerate(rows, start=2):
+        key = (row.get("whisker"), row.get("session"))
+        if key in seen:
+            raise CommandError(
+                f"{path}: lines {seen[key]} and {line} are both whisker {key[0]}, session "
+                f"{key[1]}; keep one row per session (or fit the session again)"
+            )
+        seen[key] = line
+
+
+def _flagged_per_parameter(name: str, history, flags: list[dict]) -> dict[str, list[str]]:
+    """Per parameter of ``history``, the sessions flagged for it (a failed fit, ``fit``,
+    counts for every one): the figure marks a change on the parameter that changed."""
+    mine = [f for f in flags if f["whisker"] == name.split(" (")[0]
+            and f["session"] in history.flagged]  # fmt: skip
+    return {p: sorted({f["session"] for f in mine if f["parameter"] in (p, "fit")})
+            for p in history.values}  # fmt: skip
 
 
 _FLAG_COLUMNS = ("whisker", "source", "session", "parameter", "value", "baseline",
@@ -452,3 +493,65 @@ def _print_flags(result, *, quiet: bool = False) -> None:
         return
     whiskers = len({f["whisker"] for f in result.flags})
     print(f"{len(result.flags)} flag(s) on {whiskers} whisker(s)", file=sys.stderr)
+
+
+def _add_simulate(fsub) -> None:
+    p = fsub.add_parser(
+        "simulate",
+        help="write a simulated fleet (plucks per whisker and session) to try the others on",
+        description=(
+            "Write a simulated fleet in the layout 'fleet calibrate' reads: ROOT/whisker-NNN/"
+            "whisker.toml and ROOT/whisker-NNN/session-NN/pluck-N.csv (ADS1115 codes at "
+            "--rate), each whisker's material and damping off its record's and varying a "
+            "little from session to session; --damaged of them change lastingly (zeta x 1.5 "
+            "or f1 x 0.97, alternately) from a random session after the first --baseline. "
+            "--truth writes what was simulated (CSV: whisker, session, f1_hz, zeta, damaged)."
+        ),
+        formatter_class=HelpFormatter,
+    )
+    p.add_argument("root", type=Path, metavar="ROOT", help="folder to write (new or empty)")
+    p.add_argument("--whiskers", type=int, default=3, help="number of whiskers")
+    p.add_argument("--sessions", type=int, default=4, help="sessions per whisker")
+    p.add_argument("--plucks", type=int, default=2, help="plucks per session")
+    p.add_argument("--damaged", type=int, default=1, help="whiskers that change")
+    p.add_argument("--baseline", type=int, default=2, help="sessions before any change")
+    p.add_argument("--rate", type=float, default=860.0, help="sampling rate (Hz)")
+    p.add_argument("--seed", type=int, default=0, help="seed of everything drawn")
+    p.add_argument("--truth", type=Path, help="also write the truth to this CSV file")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
+    p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    p.set_defaults(func=_cmd_simulate)
+
+
+def _cmd_simulate(args) -> dict:
+    """Write the fleet and its truth; returns the JSON summary."""
+    import math
+
+    counts = {"--whiskers": (args.whiskers, 1, 100), "--sessions": (args.sessions, 1, 100),
+              "--plucks": (args.plucks, 1, 20), "--damaged": (args.damaged, 0, args.whiskers),
+              "--baseline": (args.baseline, 1, args.sessions)}  # fmt: skip
+    for flag, (v, lo, hi) in counts.items():
+        if not lo <= v <= hi:
+            raise CommandError(f"{flag} {v}: give a whole number from {lo} to {hi}")
+    if not (math.isfinite(args.rate) and 100 <= args.rate <= 860):
+        raise CommandError(f"--rate {args.rate:g}: give a rate from 100 to 860 Hz (the ADS1115)")
+    check_outputs({"ROOT": args.root, "--truth": args.truth}, {}, force=args.force,
+                  folders=("ROOT",))  # fmt: skip
+    from ..fleet import simulate_fleet
+    from ..io import atomic_write
+
+    truth = simulate_fleet(args.root, whiskers=args.whiskers, sessions=args.sessions,
+                           plucks=args.plucks, damaged=args.damaged, baseline=args.baseline,
+                           rate_hz=args.rate, seed=args.seed)  # fmt: skip
+    if args.truth:
+        lines = ["whisker,session,f1_hz,zeta,damaged"] + [
+            f"{r['whisker']},{r['session']},{r['f1_hz']:.6g},{r['zeta']:.6g},{int(r['damaged'])}"
+            for r in truth.sessions
+        ]
+        atomic_write(args.truth, "\n".join(lines) + "\n")
+    say(
+        f"wrote {args.root}: {args.whiskers} whiskers x {args.sessions} sessions x "
+        f"{args.plucks} plucks" + (f"; the truth to {args.truth}" if args.truth else "")
+    )
+    return {"root": str(args.root), "truth": str(args.truth) if args.truth else None,
+            "damage": {w: list(d) for w, d in truth.damage.items()}}  # fmt: skip

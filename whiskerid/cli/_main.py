@@ -32,7 +32,7 @@ from . import (
     _stream,
     _train,
 )
-from ._cache import enable_compile_cache
+from ._cache import enable_compile_cache, quiet_xla
 from ._common import (
     CommandError,
     Interrupted,
@@ -126,6 +126,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     prestart(args)  # a stream's sampling process imports while this one does
+    quiet_xla()
     enable_compile_cache()
     start = time.perf_counter()
     try:

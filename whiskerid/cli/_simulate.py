@@ -1,5 +1,7 @@
 """``whiskerid simulate``: a whisker recording (CSV) from a model and an excitation."""
 
+import math
+import sys
 from pathlib import Path
 
 from .._choices import EXCITATIONS, MODELS, OBSERVABLES, UNITS
@@ -43,6 +45,21 @@ def add_parser(sub) -> None:
         type=float,
         default=1e-3,
         help="initial tip deflection of a pluck, for --excitation decay (m)",
+    )
+    p.add_argument(
+        "--cubic",
+        type=float,
+        metavar="GAMMA",
+        help="a nonlinear whisker: mode 1's cubic (Duffing) stiffness gamma (1/m^2, at the "
+        "tip), so that f(a) = f0 (1 + 3 gamma a^2 / 8); with --excitation decay (e.g. 2e4: "
+        "f1 about 0.75 %% higher at a 1 mm tip amplitude than at rest)",
+    )
+    p.add_argument(
+        "--velocity-squared",
+        type=float,
+        metavar="C",
+        help="a nonlinear whisker: mode 1's velocity-squared loss c (1/m), so that the "
+        "damping ratio grows with the amplitude; with --excitation decay",
     )
     p.add_argument(
         "--base",
@@ -101,7 +118,7 @@ def run(args) -> dict:
 
     check_outputs({"--out": args.out, "--plot": args.plot},
                   {"--whisker": args.whisker, "--base": args.base}, force=args.force)  # fmt: skip
-    record = record_or_paper(args.whisker)
+    record = _with_backbone(args, record_or_paper(args.whisker))
     if args.channels == 2:
         return _run_planes(args, record)
     base = None
@@ -123,6 +140,61 @@ def run(args) -> dict:
         seed=args.seed,
     )
     return _written(args, sim, f"{record.name}: {args.model} model, {args.excitation} excitation")
+
+
+def _with_backbone(args, record):
+    """The record with the nonlinear terms of ``--cubic`` / ``--velocity-squared`` (a
+    ``[fit.nonlinear]`` table, as a nonlinear calibration writes, which the pluck plays)."""
+    terms = {"--cubic": args.cubic, "--velocity-squared": args.velocity_squared}
+    given = {flag: v for flag, v in terms.items() if v is not None}
+    if not given:
+        return record
+    for flag, v in given.items():
+        if not math.isfinite(v) or v < 0 or v > 1e9:
+            raise CommandError(f"{flag} {v:g}: give a finite coefficient from 0 to 1e9")
+    if args.excitation != "decay" or args.channels != 1 or args.model != "exact":
+        raise CommandError(
+            f"{' and '.join(given)} make a nonlinear pluck: give --excitation decay (one "
+            "sensor, --model exact)"
+        )
+    fit = dict(record.extra.get("fit") or {})
+    nl = dict(fit.get("nonlinear") or {})
+    nl["gamma_per_m2"] = float(args.cubic or 0.0)
+    nl["coulomb_m_s2"] = float(nl.get("coulomb_m_s2", 0.0))
+    nl["quadratic_per_m"] = float(args.velocity_squared or 0.0)
+    fit["nonlinear"] = nl
+    return record.replace(extra={**record.extra, "fit": fit})
+
+
+def _clipping(args, sim) -> dict | None:
+    """Samples of an ``adc`` recording on the converter's rails: a warning on stderr (and
+    in the JSON) when more than 1 % are, with how much smaller the excitation should be."""
+    import numpy as np
+
+    from ..io import CODE_MAX, CODE_MIN
+
+    if args.observable != "adc":
+        return None
+    worst = None
+    for name, x in sim.columns.items():
+        x = np.asarray(x)
+        for rail, n in ((CODE_MAX, np.sum(x >= CODE_MAX)), (CODE_MIN, np.sum(x <= CODE_MIN))):
+            frac = float(n) / max(x.size, 1)
+            if frac > 0.01 and (worst is None or frac > worst["fraction"]):
+                # A sine of amplitude A about mid spends arccos(R/A)/pi of its time beyond a
+                # rail R away: A = R / cos(pi frac) (a guide for other signals too).
+                c = math.cos(math.pi * min(frac, 0.49))
+                worst = {"column": name, "fraction": frac, "rail": int(rail), "scale": 0.9 * c}
+    if worst is None:
+        return None
+    what = "--hb" if args.excitation == "sine" else (
+        "--tip-deflection" if args.excitation == "decay" else "the base motion")  # fmt: skip
+    worst["message"] = (
+        f"warning: {100 * worst['fraction']:.3g} % of the samples of {worst['column']} sit on "
+        f"the ADS1115's rail ({worst['rail']}): the signal is clipped; scale {what} by about "
+        f"{worst['scale']:.2g} or less (it is in metres: 2e-4 is 0.2 mm)"
+    )
+    return worst
 
 
 def _run_planes(args, record) -> dict:
@@ -185,6 +257,9 @@ def _written(args, sim, title: str, *, per_channel: bool = False) -> dict:
     from ..io import write_csv
 
     write_csv(args.out, sim)
+    clipped = _clipping(args, sim)
+    if clipped:
+        print(clipped["message"], file=sys.stderr, flush=True)
     columns = f", columns {', '.join(sim.columns)}" if per_channel else ""
     say(f"wrote {args.out} ({sim.t.size} samples of {args.observable}{columns})")
     units = UNITS[args.observable]
@@ -192,6 +267,8 @@ def _written(args, sim, title: str, *, per_channel: bool = False) -> dict:
                "observable": args.observable, "units": units}  # fmt: skip
     if per_channel:
         summary["channels"] = list(sim.columns)
+    if clipped:
+        summary["clipped"] = clipped
 
     def each(f):
         return {c: f(x) for c, x in sim.columns.items()} if per_channel else f(sim.signal())

@@ -22,6 +22,7 @@ from ._common import (
     json_safe,
     model_folder,
     record_or_paper,
+    say,
 )
 from ._prestart import discard, take
 
@@ -492,8 +493,15 @@ def _read_replay(args):
             hw.check_speed_mps(rec.meta["speed_mps"], f"--replay {args.replay} speed_mps")
         except ValueError as e:
             raise CommandError(f"{e}, or pass --speed") from None
+    length = float(rec.t[-1] - rec.t[0])
     if args.duration is None:  # the recording's length: after it there is no signal
-        args.duration = float(rec.t[-1] - rec.t[0])
+        args.duration = length
+    elif args.duration > length + 1.0 / args.rate:
+        # Past its end the emulated chip would hold the last value: a frozen sensor to the
+        # window checks. The replay ends with the file instead.
+        say(f"--replay {args.replay}: end of file at {length:.3g} s, before --duration "
+            f"{args.duration:g} s: the stream stops there")  # fmt: skip
+        args.duration = length
     return rec
 
 

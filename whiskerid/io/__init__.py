@@ -11,6 +11,8 @@ from ._added_mass import ADDED_MASS_STD_KEY as ADDED_MASS_STD_KEY
 from ._added_mass import mass_from_meta as mass_from_meta
 from ._added_mass import mass_text as mass_text
 from ._added_mass import parse_mass as parse_mass
+from ._ads1115_spec import CODE_MAX as CODE_MAX
+from ._ads1115_spec import CODE_MIN as CODE_MIN
 from ._atomic import WriteError as WriteError
 from ._atomic import atomic_folder as atomic_folder
 from ._atomic import atomic_path as atomic_path

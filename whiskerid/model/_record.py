@@ -340,6 +340,12 @@ def _check_ranges(rec: WhiskerRecord) -> None:
     _check_range("tip_mass_kg", rec.tip_mass_kg)
     for name in ("gain_v_per_m", "offset_v", "quadratic_v_per_m2"):
         _check_range(f"sensor.hall_{name}", float(getattr(rec.hall, name)))
+    gain = float(rec.hall.gain_v_per_m)
+    if abs(gain) < 1e-3:  # volts are divided by it: a zero gain reads no deflection at all
+        raise RecordError(
+            f"sensor.hall_gain_v_per_m = {gain!r}: a Hall sensor's gain must not be 0 (below "
+            "1e-3 V/m in size it reads no deflection); give the sensor's V/m"
+        )
 
 
 def _check_record(rec: WhiskerRecord) -> None:

@@ -1,6 +1,7 @@
 """Calibration plots: data and fit over the whole window and zoomed on the decay's start,
 residuals, and the spectra (matplotlib, Agg)."""
 
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -37,7 +38,13 @@ def plot_calibration(path: str | Path, cal) -> Path:
             f"residuals: RMS {info['rms_residual']:.3g} {unit}, lag-1 {info['lag1_autocorr']:.2f}",
             fontsize=9,
         )
-        _spectra(row[3], t, y, model, modes, unit)
+        # The spectra in two panels sharing the frequency axis: data and fit above (the fit
+        # drawn over the data in a contrasting dashed line), the residuals below beside the
+        # data's faint outline, so neither hides the other.
+        spec = row[3].get_subplotspec().subgridspec(2, 1, hspace=0.05, height_ratios=[3, 2])
+        row[3].remove()
+        top = fig.add_subplot(spec[0])
+        _spectra(top, fig.add_subplot(spec[1], sharex=top), t, y, model, modes, unit)
     if backbone:
         from ._backbone import backbone_panels
 
@@ -60,7 +67,10 @@ def _time_panels(ax_all, ax_zoom, t, y, model, f1, info, unit):
     ax_all.set_xlabel("t (s)")
     ax_all.set_ylabel(f"{info['observable']} ({unit})")
     where = info.get("selection") or f"from {info['t_start_s']:.4g} s"
-    ax_all.set_title(f"{info['name']}: {where}", fontsize=8)
+    # The file's name and its window on lines of their own, wrapped to the panel's width: a
+    # long name or selection would otherwise run past the figure's edge.
+    title = textwrap.fill(f"{info['name']}: {where}", 60)
+    ax_all.set_title(title, fontsize=8)
     ax_all.legend(fontsize=7, loc="upper right")
     keep = t <= end
     ax_zoom.plot(t[keep], y[keep], ".-", ms=2.5, lw=0.3, color="C0", label="data")
@@ -69,29 +79,34 @@ def _time_panels(ax_all, ax_zoom, t, y, model, f1, info, unit):
     ax_zoom.set_title(f"first {ZOOM_PERIODS} periods of f1", fontsize=9)
 
 
-def _spectra(ax, t, y, model, modes, unit):
+def _spectra(ax, ax_res, t, y, model, modes, unit):
+    """Data and fit on ``ax``, the residuals on ``ax_res`` (on the same scale, the data's
+    spectrum a faint outline behind them), the fitted modes marked on both."""
     rate = 1.0
-    # Residuals first and faint, the data on top: the data must stay visible where the
-    # residuals are as large (the noise floor).
-    for sig, label, color, z, lw in (
-        (y - model, "residuals", "C3", 1, 0.6),
-        (model, "fit", "C1", 2, 0.8),
-        (y, "data", "C0", 3, 0.9),
-    ):
+    spectra = {}
+    for name, sig in (("data", y), ("fit", model), ("residuals", y - model)):
         _, su, rate = resample_uniform(t, sig)
         f, a = amplitude_spectrum(su, rate)
-        ax.semilogy(f, np.maximum(a, 1e-30), lw=lw, label=label, color=color, zorder=z,
-                    alpha=0.6 if label == "residuals" else 1.0)  # fmt: skip
+        spectra[name] = (f, np.maximum(a, 1e-30))
+    ax.semilogy(*spectra["data"], lw=0.7, color="C0", alpha=0.8, label="data")
+    ax.semilogy(*spectra["fit"], lw=1.3, color="k", ls="--", label="fit", zorder=3)
+    ax_res.semilogy(*spectra["data"], lw=0.6, color="0.75", label="data")
+    ax_res.semilogy(*spectra["residuals"], lw=0.8, color="C3", label="residuals", zorder=3)
+    ax_res.set_ylim(ax.get_ylim())
     nyquist = rate / 2
     for k, fm in enumerate(modes):
         seen = abs(fm - rate * round(fm / rate))  # where the sampling puts it
         if seen <= nyquist:
             tag = f"f{k + 1}" + ("" if abs(seen - fm) < 1e-9 * fm else " (aliased)")
-            ax.axvline(seen, ls="--", lw=0.6, color="0.4")
+            for a in (ax, ax_res):
+                a.axvline(seen, ls=":", lw=0.6, color="0.4")
             ax.text(seen, 1.0, tag, transform=ax.get_xaxis_transform(), fontsize=7,
                     ha="center", va="bottom")  # fmt: skip
     ax.set_xlim(0, min(nyquist, max(6 * modes[0], 1.3 * max(m for m in modes if m < nyquist)
                                     if any(m < nyquist for m in modes) else nyquist)))  # fmt: skip
-    ax.set_xlabel("frequency (Hz)")
+    ax.tick_params(labelbottom=False)
+    ax_res.set_xlabel("frequency (Hz)")
     ax.set_ylabel(f"amplitude ({unit})")
-    ax.legend(fontsize=7, loc="lower left")
+    ax_res.set_ylabel("residuals")
+    ax.legend(fontsize=7, loc="upper right")
+    ax_res.legend(fontsize=7, loc="upper right")

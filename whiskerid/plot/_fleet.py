@@ -20,7 +20,7 @@ def plot_fleet_history(
     baseline: int,
     centre: dict[str, float],
     band: dict[str, float],
-    flagged: list[str],
+    flagged: list[str] | dict[str, list[str]],
     began: dict[str, int] | None = None,
 ) -> Path:
     """Save one panel per parameter: each session's value with its 1σ, the single plucks,
@@ -38,7 +38,8 @@ def plot_fleet_history(
         baseline: Number of baseline sessions (the first ones).
         centre: Parameter → the baseline's centre.
         band: Parameter → half-width of the no-flag band.
-        flagged: Flagged sessions.
+        flagged: Flagged sessions, or parameter → the sessions flagged for it (each panel
+            marks only its own parameter's: a change of ζ alone leaves f1's points blue).
         began: Parameter → index of the session where its change began (a dashed line).
     """
     plt = _pyplot()
@@ -46,8 +47,9 @@ def plot_fleet_history(
     fig, axes = plt.subplots(len(names), 1, figsize=(max(6, 0.45 * len(sessions) + 3), 5.5),
                              sharex=True, constrained_layout=True, squeeze=False)  # fmt: skip
     x = np.arange(len(sessions))
-    bad = np.array([s in flagged for s in sessions])
     for ax, p in zip(axes[:, 0], names, strict=True):
+        own = flagged.get(p, []) if isinstance(flagged, dict) else flagged
+        bad = np.array([s in own for s in sessions], dtype=bool)
         v, e = np.asarray(values[p], float), np.asarray(errors[p], float)
         for i, pk in enumerate(plucks.get(p, [])):
             ax.plot([i] * len(pk), pk, ".", ms=3, color="0.6", zorder=1)

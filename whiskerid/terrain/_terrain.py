@@ -84,7 +84,7 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm import tqdm
 
-from ..io import Recording, write_csv
+from ..io import Recording, read_recording, write_csv
 from ..model import (
     WhiskerRecord,
     paper_record,
@@ -267,6 +267,7 @@ def synthesize_dataset(
     contact: bool = False,
     preload_m: float | None = None,
     progress: bool = False,
+    resume: bool = False,
 ) -> list[Path]:
     """Write a labelled dataset ``out/<terrain>/<terrain>_v<speed>_r<run>.csv`` as CSV recordings.
 
@@ -288,10 +289,16 @@ def synthesize_dataset(
             contact with friction, one Hall sensor) instead of the base motion alone.
         preload_m: With ``contact``: the nominal preload (m); the default otherwise.
         progress: A progress bar on stderr, one step per recording written.
+        resume: Keep the recordings an interrupted call with the same settings finished
+            (the simulator's own, same seed, whisker and length) and simulate only the rest;
+            each recording depends on its terrain, speed, run and the seed alone, so the
+            dataset is the one an uninterrupted call writes.
 
     Each recording is written as soon as its batch of runs is simulated, so memory does
     not grow with the number of runs; they are written beside ``out``'s recordings and
-    moved in together at the end, so a full disk or an interruption leaves none of them.
+    moved in together at the end, so a full disk leaves none of them. An interruption
+    (Ctrl-C, SIGTERM: a ``KeyboardInterrupt``) moves in the recordings already whole, for
+    ``resume``.
 
     Returns:
         The CSV paths, in terrain, speed, run order.
@@ -308,7 +315,13 @@ def synthesize_dataset(
     _check_dataset_args(terrains, speeds, duration_s)
     specs = [RunSpec(t, float(v), r) for t in terrains for v in speeds for r in range(runs)]
     paths = dataset_paths(out, specs)
-    _check_dataset_folder(Path(out), paths if replace_synthetic else [])
+    _check_dataset_folder(Path(out), paths if replace_synthetic or resume else [])
+    all_paths = paths
+    if resume:
+        name = (record or paper_record()).name
+        done = {p for p in paths if p.exists() and _finished(p, seed, name, duration_s)}
+        specs = [sp for sp, p in zip(specs, paths, strict=True) if p not in done]
+        paths = [p for p in paths if p not in done]
     if contact:
         preload = DEFAULT_PRELOAD_M if preload_m is None else preload_m
         recs = iter_contact_runs(specs, record=record, duration_s=duration_s, seed=seed,
@@ -325,19 +338,41 @@ def synthesize_dataset(
     # All or nothing: the recordings are written into a hidden folder beside their places
     # and moved in (renames, which need no space) only when every one is whole.
     stage = Path(tempfile.mkdtemp(prefix=".synth-", suffix=".tmp", dir=out))
+    staged: list[tuple[Path, Path]] = []
     try:
-        staged = [write_csv(stage / p.relative_to(out), rec)
-                  for p, rec in zip(paths, recs, strict=True)]  # fmt: skip
-        for src, dst in zip(staged, paths, strict=True):
-            dst.parent.mkdir(parents=True, exist_ok=True)
-            os.replace(src, dst)
+        for p, rec in zip(paths, recs, strict=True):
+            staged.append((write_csv(stage / p.relative_to(out), rec), p))
+        _move_in(staged)
+    except KeyboardInterrupt:  # keep the recordings written whole, for resume
+        _move_in(staged)
+        shutil.rmtree(stage, ignore_errors=True)
+        raise
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
         if created and not any(out.iterdir()):
             out.rmdir()
         raise
     shutil.rmtree(stage, ignore_errors=True)
-    return paths
+    return all_paths
+
+
+def _move_in(staged: list[tuple[Path, Path]]) -> None:
+    for src, dst in staged:
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        os.replace(src, dst)
+
+
+def _finished(path: Path, seed: int, whisker: str, duration_s: float) -> bool:
+    """Whether ``path`` is a recording this simulator finished with these settings."""
+    if not _is_synthetic(path):
+        return False
+    try:
+        rec = read_recording(path)
+        rate = float(rec.meta["rate_hz"])
+    except (OSError, ValueError, KeyError):
+        return False
+    same = rec.meta.get("seed") == str(seed) and rec.meta.get("whisker") == whisker
+    return same and abs(rec.t.size / rate - duration_s) < 1.5 / rate
 
 
 def _check_dataset_args(terrains, speeds, duration_s) -> None:
