@@ -45,9 +45,12 @@ import argparse
 import hashlib
 import itertools
 import json
+import os
 import re
 import resource
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -115,11 +118,75 @@ def fit(path, length, decays):
     p = cal.params
     return {
         "status": cal.status,
-        "reasons": list(getattr(cal, "reasons", []) or []),
+        "reasons": sorted(cal.checks) + list(cal.warnings),
         "f1_hz": p["f1_hz"]["value"], "f1_std": p["f1_hz"]["std"],
         "zeta": p["zeta"]["value"], "zeta_std": p["zeta"]["std"],
         "cold_s": round(times[0], 2), "warm_s": round(times[1], 2),
     }  # fmt: skip
+
+
+def taps_recording(n_taps: int, n: int = 80_000, seed: int = 0):
+    """``n`` samples at 4 kHz (jittered) of a 16.3 Hz beam tapped ``n_taps`` times, evenly
+    spaced, at random phases (acceleration, m/s²; second mode at 6.27 f_1, 2 % noise).
+    Each decay falls by e³ before the next tap."""
+    rng = np.random.default_rng(seed)
+    t = np.cumsum(np.full(n, 2.5e-4) * (1.0 + 0.05 * rng.standard_normal(n)))
+    span = t[-1] / n_taps
+    y = 0.02 * 10.0 * rng.standard_normal(n)
+    # damped so that each decay falls by e³ before the next tap (a person marks each)
+    zeta = float(np.clip(3.0 / (2 * np.pi * 16.3 * span), 0.005, 0.1))
+    for k in range(n_taps):
+        tau = t - (0.1 + k * span)
+        on = tau >= 0
+        for f, z, a in ((16.3, zeta, 10.0), (6.27 * 16.3, zeta, 4.0)):
+            w = 2 * np.pi * f
+            y[on] += a * np.exp(-z * w * tau[on]) * np.sin(w * tau[on] + rng.uniform(0, 6.3))
+    return t, y
+
+
+def cost_child(n_taps: int) -> dict:
+    """Calibrate :func:`taps_recording` (all decays found, jointly) cold and warm, here."""
+    sys.path.insert(0, str(ROOT / "examples"))
+    from calibrate_cantilever import beam_record
+
+    import whiskerid as wi
+
+    t, y = taps_recording(n_taps)
+    t0 = time.perf_counter()
+    decays = find_decays(t, y)
+    out = {"taps": n_taps, "samples": int(t.size), "found": len(decays),
+           "detect_s": round(time.perf_counter() - t0, 2)}  # fmt: skip
+    obs = wi.Observation(t, y, observable="acceleration", name=f"taps-{n_taps}")
+    obs = [obs.window(d.start_s, d.end_s) for d in decays]
+    for key in ("cold_s", "warm_s"):
+        t0 = time.perf_counter()
+        cal = wi.calibrate(beam_record(30), obs if len(obs) > 1 else obs[0])
+        out[key] = round(time.perf_counter() - t0, 2)
+    out["status"] = cal.status
+    out["f1_hz"] = cal.params["f1_hz"]["value"]
+    out["peak_rss_mb"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)
+    return out
+
+
+def cost(taps: list[int], timeout_s: float) -> list[dict]:
+    """:func:`cost_child` for each number of taps, each in a fresh process with an empty
+    compilation cache of its own (cold means compiling)."""
+    rows = []
+    for n_taps in taps:
+        with tempfile.TemporaryDirectory(prefix="whiskerid-real-") as cache:
+            env = {**os.environ, "WHISKERID_COMPILE_CACHE": cache}
+            cmd = [sys.executable, __file__, "--cost-child", str(n_taps)]
+            try:
+                proc = subprocess.run(cmd, capture_output=True, text=True, env=env,
+                                      timeout=timeout_s)  # fmt: skip
+                last = proc.stdout.strip().splitlines()[-1:] or ["{}"]
+                row = json.loads(last[0]) if proc.returncode == 0 else {
+                    "taps": n_taps, "error": proc.stderr.strip().splitlines()[-1:]}  # fmt: skip
+            except subprocess.TimeoutExpired:
+                row = {"taps": n_taps, "error": f"over {timeout_s:.0f} s"}
+        rows.append(row)
+        print(json.dumps(row), file=sys.stderr)
+    return rows
 
 
 def main(argv=None) -> int:
@@ -128,7 +195,18 @@ def main(argv=None) -> int:
     ap.add_argument("--corpus", type=Path, help="the corpus folder (see the docstring)")
     ap.add_argument("--quick", action="store_true", help="shared data only (CI)")
     ap.add_argument("--fit", action="store_true", help="also calibrate the cantilever files")
+    ap.add_argument(
+        "--cost",
+        type=str,
+        metavar="N,N,...",
+        help="also calibrate 80 k-sample recordings with N taps (time, memory)",
+    )
+    ap.add_argument("--cost-timeout", type=float, default=300.0, help="seconds per case")
+    ap.add_argument("--cost-child", type=int, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    if args.cost_child is not None:
+        print(json.dumps(cost_child(args.cost_child)))
+        return 0
     marked = json.loads(MARKED.read_text())["marked"]
     paths = sorted(args.shared.glob("*/*.npy")) if args.shared.is_dir() else []
     if args.corpus and not args.quick:
@@ -192,6 +270,8 @@ def main(argv=None) -> int:
         "counted": len(counted),
         "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
     }
+    if args.cost:
+        out["cost"] = cost([int(k) for k in args.cost.split(",")], args.cost_timeout)
     print(json.dumps(out, indent=1))
     return 0 if out["count_exact"] == out["counted"] else 1
 

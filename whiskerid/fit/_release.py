@@ -142,7 +142,8 @@ def lowest_strong_line(t: np.ndarray, y: np.ndarray, f: float) -> float:
     searched at it split one release into dozens. A lower line wins when it is a *line*
     (a local maximum of the windowed spectrum standing three times above the spectrum's
     median within ±25 % of its frequency: a hold's step or a drift rises smoothly towards
-    DC and has none) and is larger there than the spectrum at ``f``.
+    DC and has none), rings at least 32 cycles over the record, and is larger there than
+    the spectrum at ``f``.
     """
     n = y.size
     dt = float(np.median(np.diff(t)))
@@ -154,7 +155,9 @@ def lowest_strong_line(t: np.ndarray, y: np.ndarray, f: float) -> float:
     freqs = np.fft.rfftfreq(n, dt)
     k_f = int(np.argmin(np.abs(freqs - f)))
     at_f = float(np.max(spec[max(0, k_f - 1) : k_f + 2]))
-    cand = np.flatnonzero((freqs >= max(3.0 / span, 1.0)) & (freqs < f / 1.5))
+    # at least 32 cycles in the record, so that ±25 % of a line's frequency spans 16 bins
+    # of the spectrum (in a short record a hold's step or a tremor makes "peaks" of a few)
+    cand = np.flatnonzero((freqs >= max(32.0 / span, 1.0)) & (freqs < f / 1.5))
     cand = cand[(cand > 0) & (cand < spec.size - 1)]
     cand = cand[(spec[cand] >= spec[cand - 1]) & (spec[cand] >= spec[cand + 1])]
     cand = cand[spec[cand] > at_f]
@@ -179,7 +182,8 @@ def _join_continuations(t, y, decays):
     """
     out = decays[:1]
     for d in decays[1:]:
-        if _rises(t, y, d.start_s, 0.5 * (out[-1].frequency_hz + d.frequency_hz)):
+        f = 0.5 * (out[-1].frequency_hz + d.frequency_hz)
+        if _rises(t, y, out[-1].start_s, out[-1].end_s, d.start_s, f):
             out.append(d)
         else:
             out[-1] = replace(out[-1], end_s=max(out[-1].end_s, d.end_s))
@@ -201,15 +205,21 @@ def _line(t, y, f, i0, i1):
     return complex(coef[2], -coef[3]), float(np.sqrt(np.mean(r**2)))
 
 
-def _rises(t, y, start_s, f):
-    """Whether the line at ``f`` is struck at ``start_s``: its amplitude over the two
-    periods from one period after it against the two periods ending one period before it
-    (clear of the release itself), beyond the amplitudes' noise; or its phase turns by more
-    than 60° (a tap out of phase). Too little record before it to tell: a rise."""
+def _rises(t, y, prev_start_s, prev_end_s, start_s, f):
+    """Whether the line at ``f`` is struck at ``start_s`` (a decay's start; the decay before
+    it spans ``prev_start_s`` to ``prev_end_s``): its amplitude over the two periods from one
+    period after it against the two periods ending one period before it, or before the
+    previous decay's end if that is earlier (a start found late, after a tap, would
+    otherwise compare the tap's own ringing with itself), beyond the amplitudes' noise; or
+    its phase turns by more than 60° (a tap out of phase). Too little record to tell: a
+    rise."""
     dt = float(np.median(np.diff(t)))
     period = max(2, round(1.0 / (f * dt)))
     s = int(np.searchsorted(t, start_s))
-    b0, b1, a0, a1 = s - 3 * period, s - period, s + period, s + 3 * period
+    b1 = min(s, int(np.searchsorted(t, prev_end_s, side="right"))) - period
+    if b1 - 2 * period < int(np.searchsorted(t, prev_start_s)):
+        b1 = s - period  # the decay before is too short: just before this one's start
+    b0, a0, a1 = b1 - 2 * period, s + period, s + 3 * period
     if b0 < 0 or a1 > t.size or 2 * period < 8:
         return True
     cb, rb = _line(t, y, f, b0, b1)
