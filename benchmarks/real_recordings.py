@@ -37,8 +37,12 @@ reasons, f_1, ζ, their 1σ, and the time of the first call (cold: compiling) an
 second (warm), with the process's peak memory. The authors' f_1 (README) is 16.49 Hz at
 30 cm and 6.02 Hz at 50 cm; at 40 and 60 cm none is published, so the model-free one stands.
 
+With ``--cost 1,10,...``: 80 000 samples at 4 kHz with that many taps (:func:`taps_recording`)
+calibrated jointly, each in a fresh process with an empty compilation cache: decays found,
+time cold and warm, peak memory (the cost's growth with the number of decays).
+
     .venv/bin/python benchmarks/real_recordings.py --quick
-    .venv/bin/python benchmarks/real_recordings.py --corpus /path/to/corpus [--fit]
+    .venv/bin/python benchmarks/real_recordings.py --corpus /path/to/corpus [--fit] [--cost 1,10]
 """
 
 import argparse
