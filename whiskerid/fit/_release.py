@@ -103,7 +103,17 @@ def find_decays(t: np.ndarray, y: np.ndarray) -> list[Decay]:
         # nothing rings, or a line at the Nyquist frequency: its samples alternate in sign
         # whatever its phase, so neither a decay rate nor a release can be measured on it
         return []
-    f = lowest_strong_line(t, y, f)
+    low = lowest_strong_line(t, y, f)
+    decays = _search(t, y, low, dt)
+    if not decays and low != f:
+        # a "line" below the ringing that rings nothing (a train of plucks' comb, a strongly
+        # damped decay's broad hump): the first difference's line it is
+        decays = _search(t, y, f, dt)
+    return decays
+
+
+def _search(t, y, f, dt):
+    """The decays ringing at ``f`` (see :func:`find_decays`), in time order."""
     period = max(2, round(1.0 / (f * dt)))
     clipped = clipped_mask(y)
     env, threshold = _envelope(y, period)
