@@ -39,7 +39,7 @@ forward by normal equations grown chunk by chunk, a stretch refused once is not 
 period by period), and a line at the Nyquist frequency is no decay.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -103,6 +103,17 @@ def find_decays(t: np.ndarray, y: np.ndarray) -> list[Decay]:
         # nothing rings, or a line at the Nyquist frequency: its samples alternate in sign
         # whatever its phase, so neither a decay rate nor a release can be measured on it
         return []
+    low = lowest_strong_line(t, y, f)
+    decays = _search(t, y, low, dt)
+    if not decays and low != f:
+        # a "line" below the ringing that rings nothing (a train of plucks' comb, a strongly
+        # damped decay's broad hump): the first difference's line it is
+        decays = _search(t, y, f, dt)
+    return decays
+
+
+def _search(t, y, f, dt):
+    """The decays ringing at ``f`` (see :func:`find_decays`), in time order."""
     period = max(2, round(1.0 / (f * dt)))
     clipped = clipped_mask(y)
     env, threshold = _envelope(y, period)
@@ -126,7 +137,110 @@ def find_decays(t: np.ndarray, y: np.ndarray) -> list[Decay]:
         i0 = int(np.searchsorted(t, d.start_s))
         i1 = int(np.searchsorted(t, d.end_s, side="right"))
         todo += [(lo, i0), (i1, hi)]
-    return sorted(decays, key=lambda d: d.start_s)
+    return _join_continuations(t, y, sorted(decays, key=lambda d: d.start_s))
+
+
+def lowest_strong_line(t: np.ndarray, y: np.ndarray, f: float) -> float:
+    """The frequency (Hz) that decays are searched at: ``f`` (the first difference's
+    strongest line, :func:`dominant_frequency`), or a lower line that is stronger in the
+    signal itself.
+
+    The first difference weights a line by its frequency, so a higher mode (the second
+    bending mode at 6.27 f_1 in an accelerometer's record, or a clamp's rattle ringing at
+    hundreds of hertz once a period) can win it while the whisker's motion is the first
+    mode's. A higher mode decays faster and is struck again by every rattle, so decays
+    searched at it split one release into dozens. A lower line wins when it is a *line*
+    (a local maximum of the windowed spectrum standing three times above the spectrum's
+    median within ±25 % of its frequency: a hold's step or a drift rises smoothly towards
+    DC and has none), rings at least 32 cycles over the record, and is larger there than
+    the spectrum at ``f``.
+    """
+    n = y.size
+    dt = float(np.median(np.diff(t)))
+    span = n * dt
+    u = np.interp(t[0] + dt * np.arange(n), t, y)
+    x = np.arange(n, dtype=float)
+    u = u - np.polyval(np.polyfit(x, u, 1), x)
+    spec = np.abs(np.fft.rfft(u * np.hanning(n)))
+    freqs = np.fft.rfftfreq(n, dt)
+    k_f = int(np.argmin(np.abs(freqs - f)))
+    at_f = float(np.max(spec[max(0, k_f - 1) : k_f + 2]))
+    # at least 32 cycles in the record, so that ±25 % of a line's frequency spans 16 bins
+    # of the spectrum (in a short record a hold's step or a tremor makes "peaks" of a few)
+    cand = np.flatnonzero((freqs >= max(32.0 / span, 1.0)) & (freqs < f / 1.5))
+    cand = cand[(cand > 0) & (cand < spec.size - 1)]
+    cand = cand[(spec[cand] >= spec[cand - 1]) & (spec[cand] >= spec[cand + 1])]
+    cand = cand[spec[cand] > at_f]
+    best, best_amp = f, 0.0
+    for k in cand[np.argsort(spec[cand])[::-1]][:20]:
+        near = (freqs >= 0.75 * freqs[k]) & (freqs <= 1.25 * freqs[k])
+        if spec[k] < np.max(spec[near]) or spec[k] < 3.0 * np.median(spec[near]):
+            continue
+        if spec[k] > best_amp:
+            best, best_amp = float(_interpolate(spec, k)[0] / (n * dt)), float(spec[k])
+    return best
+
+
+def _join_continuations(t, y, decays):
+    """Decays in time order, each later one that does not *rise* joined to the one before.
+
+    The walk forward ends a decay where its model stops predicting the data (a light
+    damping that drifts, a higher mode's beating, a glitch); the rest of the record is then
+    searched again, and the same ringing is found again as a "decay" of its own. A release
+    or a tap puts energy in: the line's amplitude just after it stands clearly above the
+    amplitude just before it, or its phase jumps. A continuation's does neither.
+    """
+    out = decays[:1]
+    for d in decays[1:]:
+        f = 0.5 * (out[-1].frequency_hz + d.frequency_hz)
+        if _rises(t, y, out[-1].start_s, out[-1].end_s, d.start_s, f):
+            out.append(d)
+        else:
+            out[-1] = replace(out[-1], end_s=max(out[-1].end_s, d.end_s))
+    return out
+
+
+#: A line this much larger just after a decay's start than just before it has been struck.
+RISE = 1.3
+
+
+def _line(t, y, f, i0, i1):
+    """Complex amplitude (referred to ``t = 0``) of the line at ``f`` fitted with an offset
+    and a slope to samples ``[i0, i1)``, and the fit's residual RMS."""
+    tt = t[i0:i1]
+    w = 2 * np.pi * f * tt
+    a = np.stack([np.ones_like(tt), tt - tt[0], np.cos(w), np.sin(w)], axis=1)
+    coef, *_ = np.linalg.lstsq(a, y[i0:i1], rcond=None)
+    r = y[i0:i1] - a @ coef
+    return complex(coef[2], -coef[3]), float(np.sqrt(np.mean(r**2)))
+
+
+def _rises(t, y, prev_start_s, prev_end_s, start_s, f):
+    """Whether the line at ``f`` is struck at ``start_s`` (a decay's start; the decay before
+    it spans ``prev_start_s`` to ``prev_end_s``): its amplitude over the two periods from one
+    period after it against the two periods ending one period before it, or before the
+    previous decay's end if that is earlier (a start found late, after a tap, would
+    otherwise compare the tap's own ringing with itself), beyond the amplitudes' noise; or
+    its phase turns by more than 60° (a tap out of phase). Too little record to tell: a
+    rise."""
+    dt = float(np.median(np.diff(t)))
+    period = max(2, round(1.0 / (f * dt)))
+    s = int(np.searchsorted(t, start_s))
+    b1 = min(s, int(np.searchsorted(t, prev_end_s, side="right"))) - period
+    if b1 - 2 * period < int(np.searchsorted(t, prev_start_s)):
+        b1 = s - period  # the decay before is too short: just before this one's start
+    b0, a0, a1 = b1 - 2 * period, s + period, s + 3 * period
+    if b0 < 0 or a1 > t.size or 2 * period < 8:
+        return True
+    cb, rb = _line(t, y, f, b0, b1)
+    ca, ra = _line(t, y, f, a0, a1)
+    noise = 4.0 * max(rb, ra) * np.sqrt(2.0 / (2 * period))
+    if abs(ca) > RISE * abs(cb) + noise:
+        return True
+    if min(abs(ca), abs(cb)) > 2.0 * noise:
+        turn = abs(np.angle(ca / cb))
+        return bool(turn > np.pi / 3)
+    return False
 
 
 def _normalised(y) -> np.ndarray | None:
