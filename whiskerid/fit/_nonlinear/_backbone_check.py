@@ -20,9 +20,9 @@ windows' scatter at 40 dB, while ζ₀ (an ``a → 0`` value) comes out 2–3 % 
 """
 
 import numpy as np
-from scipy.stats import t as student_t
 
 from .._linear import bucket, fit_windows
+from .._numerics import f_sf
 
 #: Periods of the first mode per window (short: many windows per band).
 CHECK_PERIODS = 3
@@ -101,7 +101,8 @@ def backbone_check(obs, curves, per_rec: list[dict], f1_hz: float, *, alpha=P_FA
             tv = float(np.mean(d) / se) if se > 0 else 0.0
             band[name] = float(np.mean(d))
             band[f"t_{name}"] = tv
-            band[f"p_{name}"] = float(2 * student_t.sf(abs(tv), n - 1))
+            # two-sided Student t: t² is F(1, n − 1) (no SciPy on the calibration's path)
+            band[f"p_{name}"] = float(f_sf(tv**2, 1, n - 1))
         out["bands"].append(band)
         if min(band["p_df_hz"], band["p_dzeta"]) < level:
             out["misfit"].append(band)
