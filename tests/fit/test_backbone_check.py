@@ -30,8 +30,8 @@ def test_a_correct_curve_passes_at_its_false_alarm_rate_and_a_wrong_law_does_not
     """20 noise draws about the true curve: at most 2 alarms (α = 1 %, expected 0.2); a
     constant-ζ curve against data whose ζ halves along the decay: ``backbone-misfit``,
     naming the bands."""
-    t = np.arange(0, 1.5, 1 / RATE)
-    truth = _decay(np.full(t.size, 0.01), t)
+    t = np.arange(0, 3.0, 1 / RATE)
+    truth = _decay(np.full(t.size, 0.005), t)
     rng = np.random.default_rng(3)
     alarms = 0
     for _ in range(20):
@@ -39,8 +39,8 @@ def test_a_correct_curve_passes_at_its_false_alarm_rate_and_a_wrong_law_does_not
         assert len(check["bands"]) == 4 and check["level"] < 0.01 / 8 * 1.01
         alarms += bool(check["misfit"])
     assert alarms <= 2
-    # ζ from 0.015 at the release to 0.0075 (amplitude-dependent damping), fitted as 0.01
-    data = _decay(0.0075 + 0.0075 * np.exp(-t / 0.3), t) + rng.normal(0, 0.003, t.size)
+    # ζ from 0.015 at the release to 0.0075 (amplitude-dependent damping), fitted as 0.005
+    data = _decay(0.0075 + 0.0075 * np.exp(-t / 0.6), t) + rng.normal(0, 0.003, t.size)
     check = _check(data, truth, t, 0.003)
     assert check["misfit"]
     text = misfit_reason(check)

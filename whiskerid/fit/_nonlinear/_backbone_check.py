@@ -30,8 +30,8 @@ CHECK_PERIODS = 3
 CHECK_MIN_SAMPLES = 12
 #: Most amplitude bands.
 BANDS = 4
-#: Fewest windows per band.
-MIN_PER_BAND = 4
+#: Fewest windows per band (a band of 4 has 3 degrees of freedom: too weak a test).
+MIN_PER_BAND = 8
 #: False-alarm rate of the check for a correct model (all bands together).
 P_FALSE = 0.01
 
