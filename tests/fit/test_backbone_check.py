@@ -65,8 +65,19 @@ def test_backbone_check_on_independent_plucks():
     with the check run; the same law fitted without its damping term is refused
     (``backbone-misfit``). Not asserted because it is not so: a cubic-damping pluck
     (``ζ ∝ a²``, outside the family) passes the check, its ζ₀ several σ low (the module's
-    docstring says why)."""
+    docstring says why; the strict xfail below)."""
     nl, _ = _fit("cubic+velocity-squared", 0)
     assert nl.status == "ok", nl.warnings
     assert nl.diagnostics["backbone_check"]["bands"]
     assert "backbone-misfit" not in nl.checks
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="the backbone check does not see cubic damping (issue 46)")
+def test_a_cubic_damping_pluck_is_not_ok():
+    """Cubic damping ``u²u̇`` (ζ ×1.5 at the release, outside the family): the fit's ζ₀ is
+    10 % low at a pull near −5, and ``ok``. Strict: when a wider damping family or model
+    averaging makes it right or not ``ok``, this test says so."""
+    nl, truth = _fit("softening+cubic-damping", 0)
+    p = nl.params["zeta"]
+    assert nl.status != "ok" or abs(p["value"] - truth["zeta0"]) < 3 * p["std"]
