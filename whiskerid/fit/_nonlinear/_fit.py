@@ -51,6 +51,7 @@ from .._result import (
     recording_blocks,
     reported_std,
 )
+from ._backbone_check import backbone_check, misfit_reason
 from ._free_modes import FreeModesProblem, free_higher_modes, free_modes_table
 from ._friction import friction_waveform as friction_waveform
 from ._logpoly import logpoly_table, lowest_informed_amplitude
@@ -194,6 +195,11 @@ def fit_nonlinear(
                 f"zeta(a) falls to {z.min():.3g} within the recorded amplitudes: the damping "
                 "terms fitted do not describe these data; fit fewer terms (--nl-terms)"
             )
+        # the backbone against the decays' own short-window f and zeta (model-free)
+        bb_check = backbone_check(obs, curves, per_rec, float(params["f1_hz"]["value"]))
+        diagnostics["backbone_check"] = bb_check
+        if (reason := misfit_reason(bb_check)) is not None:
+            checks["backbone-misfit"] = reason
     status, warnings = fit_status(status, ok, warnings, checks)
     out = NonlinearCalibration(
         status=status, ok=ok, params=params, correlations=corr, fixed=dict(linear.fixed),
