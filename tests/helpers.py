@@ -1,7 +1,8 @@
 """Independent reference solutions and problem tables for the tests.
 
-Nothing here imports whiskerid's model code: these are separate transcriptions (NumPy) and
-a separate discretisation (finite elements), so agreement means something.
+No response here is computed by whiskerid's model code (whiskerid gives only the paper
+whisker's record and the fit's data types): these are separate transcriptions (NumPy, SciPy's
+integrators) and a separate discretisation (finite elements), so agreement means something.
 """
 
 import subprocess
@@ -10,8 +11,11 @@ import sys
 import jax.numpy as jnp
 import numpy as np
 import scipy.linalg
+from scipy.integrate import solve_ivp
 
-from whiskerid.fit import RecordingModel
+from whiskerid.fit import Observation, RecordingModel, nominal_gain
+from whiskerid.fit._nonlinear import tip_per_sensor
+from whiskerid.model import paper_record
 
 #: The paper whisker's derived values and natural frequencies (from its Section III geometry).
 PAPER_EI = 3.436e-3
@@ -171,8 +175,6 @@ class FEMBeam:
         Starts from the deflection w0 at rest, or from rest under the base acceleration
         base_acc(t). Returns nodal deflections and slopes at t_eval, shape (len(t), dofs).
         """
-        from scipy.integrate import solve_ivp
-
         w2, phi = scipy.linalg.eigh(self.K, self.M, subset_by_index=[0, n_modes - 1])
         phi = phi / np.sqrt(np.einsum("ij,jk,ki->i", phi.T, self.M, phi))  # mass-normalised
         omega = np.sqrt(w2)
@@ -243,3 +245,83 @@ def start_child(script: str, argv: list[str], marker: str):
             return child, lines, True
         lines.append(line)
     return child, lines, False
+
+
+# Nonlinear plucks integrated by SciPy (not the project's model): the fit, posterior and
+# free-mode tests share them. Mode 1 at F0 Hz, damping Z0, amplitude A0 (normalised).
+F0, Z0, A0 = 38.0, 0.02, 2e-3
+
+
+def scipy_decay(
+    t,
+    gamma=0.0,
+    c=0.0,
+    friction=0.0,
+    u0=A0,
+    v0=0.0,
+    zeta0=Z0,
+    f0=F0,
+    kappa=0.0,
+    *,
+    acceleration=False,
+):
+    """u(t) by SciPy, restarted at each velocity zero (exact sign of the friction); with
+    ``acceleration``, ü(t) instead: the right-hand side at the integrated (u, u̇)."""
+    w0 = 2 * np.pi * f0
+
+    def rhs(s, y, sgn):
+        u, v = y
+        return [v, -(2 * zeta0 * w0 * v + w0**2 * (u + kappa * u * abs(u) + gamma * u**3)
+                     + c * abs(v) * v + friction * sgn)]  # fmt: skip
+
+    def turn(s, y, sgn):
+        return y[1]
+
+    turn.terminal = True
+    out = np.zeros((2, t.size))
+    y, s0 = np.array([u0, v0]), t[0]
+    sgn = np.sign(v0) if v0 else -np.sign(u0)
+    while s0 < t[-1]:
+        turn.direction = -sgn
+        sol = solve_ivp(rhs, (s0, t[-1]), y, args=(sgn,), events=turn, rtol=1e-11,
+                        atol=1e-16, method="DOP853", dense_output=True)  # fmt: skip
+        sel = (t >= s0) & (t <= sol.t[-1])
+        out[:, sel] = sol.sol(t[sel])
+        y, s0 = sol.y[:, -1].copy(), sol.t[-1]
+        if sol.status != 1:
+            break
+        y[1] = 0.0
+        if abs(w0**2 * (y[0] + kappa * y[0] * abs(y[0]) + gamma * y[0] ** 3)) <= friction:
+            out[:, t > s0] = [[y[0]], [0.0]]
+            break
+        sgn = -sgn
+    if acceleration:  # ü from the equation itself (no friction: its sign is per segment)
+        assert friction == 0.0
+        return np.asarray(rhs(0.0, out, 0.0)[1])
+    return out[0]
+
+
+def nonlinear_pluck(rate=860.0, rise=0.004, zq=0.25, seed=0, duration=None, observable="voltage"):
+    """A pluck of the paper whisker's first mode by SciPy (40 dB), read by the Hall sensor in
+    volts or by an accelerometer at the tip in m/s² (``ü``, with a 0.2 m/s² bias)."""
+    record = paper_record()
+    w = record.whisker().with_modes(1)
+    f0 = float(w.natural_frequencies_hz[0])
+    acc = observable == "acceleration"
+    x_m = record.structure.length_m if acc else record.sensor_position_m
+    ratio = float(tip_per_sensor(w, x_m))
+    a_s = 2e-3 / ratio
+    zeta0 = 0.031
+    gamma = rise * 8 / (3 * a_s**2)
+    c = 3 * np.pi * zq * zeta0 / (4 * a_s)
+    rng = np.random.default_rng(seed)
+    duration = duration or 4.6 / (2 * np.pi * f0 * zeta0)
+    t = np.arange(0, duration, 1 / rate) + rng.uniform(0, 1 / rate)
+    u = scipy_decay(np.concatenate([[0.0], t]), gamma, c, u0=a_s, zeta0=zeta0, f0=f0,
+                    acceleration=acc)[1:]  # fmt: skip
+    gain = 1.0 if acc else nominal_gain(record, "voltage")
+    y = (0.2 if acc else 1.65) + gain * u + rng.normal(0, np.std(gain * u) / 100, t.size)
+    truth = {"f1_hz": f0, "zeta": zeta0, "gamma_per_m2": gamma / ratio**2,
+             "quadratic_per_m": c / ratio}  # fmt: skip
+    obs = Observation(t, y, observable=observable, gain=gain, x_m=x_m)
+    return record, obs, truth

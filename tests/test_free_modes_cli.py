@@ -117,9 +117,9 @@ def test_calibrate_free_modes_then_simulate_the_record_and_refit(tmp_path):
     nonlinear --free-modes --json`` reports f2, zeta_2 and a white residual spectrum at both
     modes, and stores them; ``simulate`` from that record and a refit recover the record's
     f2 and zeta_2 by their 1-sigma."""
-    from test_nonlinear import _pluck
+    from helpers import nonlinear_pluck
 
-    record, obs, _ = _pluck(seed=2)
+    record, obs, _ = nonlinear_pluck(seed=2)
     f2 = 1.04 * float(record.whisker().with_modes(2).natural_frequencies_hz[1])
     z2, t = 0.003, obs.t
     wd = 2 * np.pi * f2 * np.sqrt(1 - z2**2)

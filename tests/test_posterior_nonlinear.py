@@ -3,7 +3,7 @@ made by an independent SciPy integrator (the generator of ``test_nonlinear``).""
 
 import numpy as np
 import pytest
-from test_nonlinear import _pluck
+from helpers import nonlinear_pluck
 
 from whiskerid import posterior as P
 from whiskerid.fit import calibrate
@@ -24,7 +24,7 @@ def test_nonlinear_record_refusals_and_terms():
     rec = _nonlinear_record(gamma_per_m2=2.0e3, quadratic_per_m=9.0)
     assert is_nonlinear(rec) and not is_nonlinear(paper_record())
     assert fitted_terms(rec) == ("cubic", "quadratic")
-    _, obs, _ = _pluck(rate=200.0, duration=0.2)
+    _, obs, _ = nonlinear_pluck(rate=200.0, duration=0.2)
     with pytest.raises(P.PosteriorError, match="cannot be marginalised"):
         P.setup_posterior(rec, obs, marginalize=True)
     static = StaticTest(force_n=np.array([0.0, 0.01, 0.02]),
@@ -38,7 +38,7 @@ def test_nonlinear_posterior_agrees_with_calibrate_and_covers_the_truth():
     """A SciPy pluck with 0.4 % stiffening and ζ 1.25× at the release (200 Hz, 40 dB): the
     posterior medians of f₀, ζ₀, γ and c lie within 1σ of the nonlinear calibration's values,
     and the truth lies inside the 95 % interval; the chain is long enough (50 τ)."""
-    record, obs, truth = _pluck(rate=200.0, seed=1)
+    record, obs, truth = nonlinear_pluck(rate=200.0, seed=1)
     cal = calibrate(record, obs, n_modes=1, model="nonlinear", nl_terms=("cubic", "quadratic"))
     assert cal.status == "ok", cal.warnings
     post = P.sample_posterior(cal.record, obs, walkers=32, steps=2000, seed=3)

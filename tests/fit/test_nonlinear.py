@@ -6,70 +6,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import A0, F0, Z0, nonlinear_pluck, scipy_decay
 from jax.test_util import check_grads
-from scipy.integrate import solve_ivp
 
 from whiskerid.fit import Observation, calibrate, nominal_gain
 from whiskerid.fit._nonlinear import NonlinearProblem, tip_per_sensor
 from whiskerid.model import (
     NonlinearMode,
     nonlinear_response,
-    paper_record,
     slow_flow,
     slow_flow_decay,
 )
 
-F0, Z0, A0 = 38.0, 0.02, 2e-3
 W0 = 2 * np.pi * F0
-
-
-def scipy_decay(
-    t,
-    gamma=0.0,
-    c=0.0,
-    friction=0.0,
-    u0=A0,
-    v0=0.0,
-    zeta0=Z0,
-    f0=F0,
-    kappa=0.0,
-    *,
-    acceleration=False,
-):
-    """u(t) by SciPy, restarted at each velocity zero (exact sign of the friction); with
-    ``acceleration``, ü(t) instead: the right-hand side at the integrated (u, u̇)."""
-    w0 = 2 * np.pi * f0
-
-    def rhs(s, y, sgn):
-        u, v = y
-        return [v, -(2 * zeta0 * w0 * v + w0**2 * (u + kappa * u * abs(u) + gamma * u**3)
-                     + c * abs(v) * v + friction * sgn)]  # fmt: skip
-
-    def turn(s, y, sgn):
-        return y[1]
-
-    turn.terminal = True
-    out = np.zeros((2, t.size))
-    y, s0 = np.array([u0, v0]), t[0]
-    sgn = np.sign(v0) if v0 else -np.sign(u0)
-    while s0 < t[-1]:
-        turn.direction = -sgn
-        sol = solve_ivp(rhs, (s0, t[-1]), y, args=(sgn,), events=turn, rtol=1e-11,
-                        atol=1e-16, method="DOP853", dense_output=True)  # fmt: skip
-        sel = (t >= s0) & (t <= sol.t[-1])
-        out[:, sel] = sol.sol(t[sel])
-        y, s0 = sol.y[:, -1].copy(), sol.t[-1]
-        if sol.status != 1:
-            break
-        y[1] = 0.0
-        if abs(w0**2 * (y[0] + kappa * y[0] * abs(y[0]) + gamma * y[0] ** 3)) <= friction:
-            out[:, t > s0] = [[y[0]], [0.0]]
-            break
-        sgn = -sgn
-    if acceleration:  # ü from the equation itself (no friction: its sign is per segment)
-        assert friction == 0.0
-        return np.asarray(rhs(0.0, out, 0.0)[1])
-    return out[0]
 
 
 def test_mode_checks_shapes_and_linear_limit():
@@ -201,36 +150,10 @@ def test_zeta_of_amplitude_is_equivalent_linearisation():
     assert float(m.zeta(a)) == pytest.approx(expected, rel=1e-12)
 
 
-def _pluck(rate=860.0, rise=0.004, zq=0.25, seed=0, duration=None, observable="voltage"):
-    """A pluck of the paper whisker's first mode by SciPy (40 dB), read by the Hall sensor in
-    volts or by an accelerometer at the tip in m/s² (``ü``, with a 0.2 m/s² bias)."""
-    record = paper_record()
-    w = record.whisker().with_modes(1)
-    f0 = float(w.natural_frequencies_hz[0])
-    acc = observable == "acceleration"
-    x_m = record.structure.length_m if acc else record.sensor_position_m
-    ratio = float(tip_per_sensor(w, x_m))
-    a_s = 2e-3 / ratio
-    zeta0 = 0.031
-    gamma = rise * 8 / (3 * a_s**2)
-    c = 3 * np.pi * zq * zeta0 / (4 * a_s)
-    rng = np.random.default_rng(seed)
-    duration = duration or 4.6 / (2 * np.pi * f0 * zeta0)
-    t = np.arange(0, duration, 1 / rate) + rng.uniform(0, 1 / rate)
-    u = scipy_decay(np.concatenate([[0.0], t]), gamma, c, u0=a_s, zeta0=zeta0, f0=f0,
-                    acceleration=acc)[1:]  # fmt: skip
-    gain = 1.0 if acc else nominal_gain(record, "voltage")
-    y = (0.2 if acc else 1.65) + gain * u + rng.normal(0, np.std(gain * u) / 100, t.size)
-    truth = {"f1_hz": f0, "zeta": zeta0, "gamma_per_m2": gamma / ratio**2,
-             "quadratic_per_m": c / ratio}  # fmt: skip
-    obs = Observation(t, y, observable=observable, gain=gain, x_m=x_m)
-    return record, obs, truth
-
-
 def test_model_choice_is_checked_before_fitting():
     from whiskerid.fit import CalibrationError, StaticTest
 
-    record, obs, _ = _pluck(rate=200.0, duration=0.2)
+    record, obs, _ = nonlinear_pluck(rate=200.0, duration=0.2)
     with pytest.raises(CalibrationError, match="model must be"):
         calibrate(record, obs, model="quadratic")
     static = StaticTest(force_n=np.array([0.0, 0.01, 0.02]),
@@ -243,7 +166,7 @@ def test_model_choice_is_checked_before_fitting():
 def test_gradients_through_the_fit_forward_model():
     """check_grads of the nonlinear fit's residuals (slow flow in the loop) in all
     parameters, at a point with every nonlinear term switched on."""
-    record, obs, _ = _pluck(rate=200.0, duration=0.2)
+    record, obs, _ = nonlinear_pluck(rate=200.0, duration=0.2)
     from whiskerid.fit import FitProblem
 
     base = FitProblem.from_observations(record, [obs], n_modes=1)
@@ -268,11 +191,11 @@ def test_gradients_through_the_fit_forward_model():
 
 
 @pytest.mark.slow
-def test_nonlinear_calibration_recovers_an_independent_pluck():
+def test_nonlinear_calibration_recovers_an_independentnonlinear_pluck():
     """A SciPy pluck with 0.4 % stiffening and ζ 1.25× at release: the linear fit is not
     ok (the amplitude test names the damping), the nonlinear fit is ok and right within
     3σ in f0, ζ0 and both coefficients; ``auto`` picks it."""
-    record, obs, truth = _pluck()
+    record, obs, truth = nonlinear_pluck()
     lin = calibrate(record, obs, n_modes=1)
     assert lin.status != "ok"
     assert "amplitude-dependent" in lin.checks
@@ -292,7 +215,7 @@ def test_nonlinear_calibration_recovers_an_independent_pluck():
 
 
 @pytest.mark.slow
-def test_nonlinear_calibration_of_an_accelerometer_pluck():
+def test_nonlinear_calibration_of_an_accelerometernonlinear_pluck():
     """An accelerometer at the tip reads ü of a SciPy pluck (0.4 % stiffening, ζ 1.25× at
     release; ü from the equation's right-hand side, 40 dB): four seeds, each ``ok`` with f0,
     ζ0, γ and c within 3σ, and f0 within 0.15 %, ζ0 within 10 %. The accelerometer reads
@@ -300,7 +223,7 @@ def test_nonlinear_calibration_of_an_accelerometer_pluck():
     25 % low, −4σ in every seed."""
     pulls = []
     for seed in range(4):
-        record, obs, truth = _pluck(seed=seed, observable="acceleration")
+        record, obs, truth = nonlinear_pluck(seed=seed, observable="acceleration")
         nl = calibrate(record, obs, n_modes=1, model="nonlinear", nl_terms=("cubic", "quadratic"))
         assert nl.status == "ok", (seed, nl.warnings)
         pulls.append({k: (nl.params[k]["value"] - v) / nl.params[k]["std"]
@@ -321,7 +244,7 @@ def test_a_change_under_the_size_rule_is_rejected_when_both_tests_agree(monkeypa
     from whiskerid.fit._choice import _amplitude as _amplitude
 
     monkeypatch.setattr(_amplitude, "MIN_REL_CHANGE_F", 2e-3)
-    record, obs, truth = _pluck(rate=860.0, rise=0.001, zq=0.0, seed=6)
+    record, obs, truth = nonlinear_pluck(rate=860.0, rise=0.001, zq=0.0, seed=6)
     lin = calibrate(record, obs, n_modes=1)
     test = lin.diagnostics["amplitude_test"]
     assert test["nonlinear"]["rel_change_f"] < 2e-3 and test["nonlinear"]["rel_change_zeta"] < 0.05
@@ -337,7 +260,7 @@ def test_a_change_too_small_to_reject_widens_the_linear_sigma():
     """0.1 % stiffening at 860 Hz that neither test rejects at 10⁻⁴ (p ≈ 2e-3), though BIC
     prefers the cubic term: the linear f1 averages the backbone, 9.5 of its white 1σ above
     f0. The fit stays ``ok`` with the averaging bias in its 1σ, so it is right by it."""
-    record, obs, truth = _pluck(rate=860.0, rise=0.001, zq=0.0, seed=3)
+    record, obs, truth = nonlinear_pluck(rate=860.0, rise=0.001, zq=0.0, seed=3)
     lin = calibrate(record, obs, n_modes=1)
     assert lin.status == "ok" and "amplitude-dependent" not in lin.checks
     me = lin.diagnostics["model_error"]
@@ -354,7 +277,7 @@ def test_a_change_too_small_to_reject_widens_the_linear_sigma():
 def test_linear_pluck_is_not_marked_amplitude_dependent():
     """No nonlinear term: the amplitude test passes (several seeds and both rates)."""
     for seed, rate in ((1, 200.0), (2, 860.0), (3, 860.0)):
-        record, obs, truth = _pluck(rate=rate, rise=0.0, zq=0.0, seed=seed)
+        record, obs, truth = nonlinear_pluck(rate=rate, rise=0.0, zq=0.0, seed=seed)
         lin = calibrate(record, obs, n_modes=1)
         assert "amplitude-dependent" not in lin.checks, lin.diagnostics["amplitude_test"]
         assert lin.status == "ok"
@@ -369,7 +292,7 @@ def test_term_selection_drops_what_the_data_do_not_need():
     all three: each step is a fit of its own, compiled for its terms.)"""
     from whiskerid.fit import calibrate_nonlinear_selected
 
-    record, obs, truth = _pluck(rate=200.0, rise=0.0, zq=0.25, seed=4)
+    record, obs, truth = nonlinear_pluck(rate=200.0, rise=0.0, zq=0.25, seed=4)
     lin = calibrate(record, obs, n_modes=1)
     nl = calibrate_nonlinear_selected(lin, [obs], candidates=("quadratic", "cubic"))
     sel = nl.diagnostics["term_selection"]
@@ -418,7 +341,7 @@ def test_nonlinear_recordings_in_one_bucket_share_programs_and_the_padding_count
             compiles.append(kwargs.get("fun_name"))
 
     jax.monitoring.register_event_duration_secs_listener(listen)
-    record, first, _ = _pluck(seed=0, duration=448 / 860.0)
+    record, first, _ = nonlinear_pluck(seed=0, duration=448 / 860.0)
     f0 = float(record.whisker().natural_frequencies_hz[0])
     w0, zeta0, a_s = 2 * np.pi * f0, 0.031, 2e-3 / float(tip_per_sensor(
         record.whisker().with_modes(1), record.sensor_position_m))  # fmt: skip

@@ -46,11 +46,11 @@ def test_a_free_second_mode_is_found_where_the_beam_does_not_put_it():
     above the noise); in the nonlinear fit, free (started at the data's line) it is fitted
     within 3σ, as are f0 and ζ0, and every band of the residual spectrum is
     indistinguishable from the noise."""
-    from test_nonlinear import _pluck
+    from helpers import nonlinear_pluck
 
     from whiskerid.fit import Observation, calibrate, calibrate_nonlinear
 
-    record, obs, truth = _pluck(seed=2)
+    record, obs, truth = nonlinear_pluck(seed=2)
     w2 = record.whisker().with_modes(2)
     f2 = 1.04 * float(w2.natural_frequencies_hz[1])
     z2 = 0.003
