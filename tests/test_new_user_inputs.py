@@ -26,6 +26,9 @@ def tree(tmp_path):
     write_csv(tmp_path / "b.csv", rec)
     (tmp_path / "data" / "brick").mkdir(parents=True)
     write_csv(tmp_path / "data" / "brick" / "r1.csv", rec)
+    acc = np.sin(2 * np.pi * 20 * t)
+    acc[7] = 1e300  # a corrupt sample, finite but absurd
+    write_csv(tmp_path / "base.csv", Recording(t, {"acc": acc}))
     return tmp_path
 
 
@@ -60,6 +63,8 @@ BAD = [
     ("dataset synth --out {d}/syn --runs 0", ["--runs", "0"]),
     ("fleet simulate {d}/fleet --rate 1e6", ["--rate", "1e+06"]),
     ("fleet simulate {d}/fleet --damaged 5 --whiskers 3", ["--damaged", "5"]),
+    ("simulate --excitation base --base {d}/base.csv --out {d}/s.csv",
+     ["--base", "base.csv", "sample 7", "1e+300", "plausible", "m/s^2"]),
 ]  # fmt: skip
 
 
