@@ -147,3 +147,25 @@ def test_fleet_check_refuses_a_session_given_twice_and_bytes_that_are_not_text(t
     assert main(["fleet", "check", str(fleet), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "health.csv" in err and "UTF-8" in err and "Traceback" not in err
+
+
+def test_calibrate_writes_neither_out_nor_plot_when_the_plot_fails(tree, capsys, monkeypatch):
+    """A full disk while the figure is written leaves no --out behind (all or nothing)."""
+    import errno
+
+    from matplotlib.figure import Figure
+
+    def full_disk(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(Figure, "savefig", full_disk)
+    argv = [*CAL.format(d=tree).split(), "--plot", str(tree / "o.png"), "--quiet"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert "o.png" in err and "No space left" in err and "Traceback" not in err, err
+    assert not (tree / "o.toml").exists() and not (tree / "o.png").exists()
+    assert not [p.name for p in tree.iterdir() if p.name.startswith(".")]
+    monkeypatch.undo()
+    monkeypatch.chdir(Path(__file__).resolve().parent.parent)
+    assert main(argv) == 0
+    assert (tree / "o.toml").exists() and (tree / "o.png").read_bytes()[:4] == b"\x89PNG"
