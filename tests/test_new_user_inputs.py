@@ -169,3 +169,28 @@ def test_calibrate_writes_neither_out_nor_plot_when_the_plot_fails(tree, capsys,
     monkeypatch.chdir(Path(__file__).resolve().parent.parent)
     assert main(argv) == 0
     assert (tree / "o.toml").exists() and (tree / "o.png").read_bytes()[:4] == b"\x89PNG"
+
+
+@pytest.mark.parametrize("value", ["nan", "", "-46.0"])
+def test_fleet_check_refuses_a_usable_row_without_a_positive_value(tmp_path, capsys, value):
+    """A failed drive logs NaN beside its failure (flagged ``fit``); NaN, a blank or a
+    negative value beside ``ok`` is a damaged file, refused naming file, line and column."""
+    from whiskerid.fleet import write_table
+
+    fleet = tmp_path / "FLEET"
+    fleet.mkdir()
+    rows = [{"whisker": "w0", "session": f"2026-11-2{i}", "f1_hz": "46.0", "zeta": "0.04",
+             "status": "ok"} for i in range(4)]  # fmt: skip
+    write_table(fleet / "fleet.csv", rows)
+    failed = {**rows[3], "session": "2026-11-29", "f1_hz": "nan", "zeta": "nan",
+              "status": "too short"}  # fmt: skip
+    write_table(fleet / "health.csv", [*rows, failed])
+    argv = ["fleet", "check", str(fleet), "--no-plots", "--quiet", "--json"]
+    assert main(argv) == 0
+    flags = json.loads(capsys.readouterr().out)["flags"]
+    assert [(f["session"], f["parameter"]) for f in flags] == [("2026-11-29", "fit")]
+    write_table(fleet / "health.csv", [*rows[:2], {**rows[2], "zeta": value}, rows[3]])
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "Traceback" not in err, err
+    assert "health.csv: line 4, column 6 (zeta)" in err and repr(value) in err, err
