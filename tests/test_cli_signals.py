@@ -106,3 +106,41 @@ def test_a_second_signal_during_the_teardown_exits_with_the_first_status(tmp_pat
         child.send_signal(signal.SIGTERM)
         assert child.wait(timeout=30) == 130  # the first signal's status (SIGINT)
         assert time.perf_counter() - t0 < 5
+
+
+def test_a_signal_in_the_teardown_after_a_normal_end_exits_143_with_one_line(tmp_path):
+    """A SIGTERM in the last moments of a command that ended normally (here held in an exit
+    handler that runs after JAX's) ends it with 143 and one line, not by the default action
+    (-15)."""
+    from whiskerid.fleet import write_table
+
+    fleet = tmp_path / "FLEET"
+    fleet.mkdir()
+    write_table(fleet / "fleet.csv", [{"whisker": "w0", "session": f"2026-11-2{i}",
+                                       "f1_hz": "46.0", "zeta": "0.04", "status": "ok"}
+                                      for i in range(4)])  # fmt: skip
+    script = textwrap.dedent("""
+        import atexit, sys, time
+        def teardown():
+            print("TEARDOWN", file=sys.stderr, flush=True)
+            time.sleep(10)
+        atexit.register(teardown)  # registered first: runs last
+        from whiskerid.cli._main import main
+        sys.argv = ["whiskerid", *sys.argv[1:]]
+        sys.exit(main())
+    """)
+    child, before, came = start_child(script, ["fleet", "check", str(fleet), "--no-plots"],
+                                      "TEARDOWN")  # fmt: skip
+    assert came, "".join(before)
+    t0 = time.perf_counter()
+    child.send_signal(signal.SIGTERM)
+    err = child.stderr.read()
+    assert child.wait(timeout=30) == 143, err
+    child.stdout.close()
+    child.stderr.close()
+    assert time.perf_counter() - t0 < 5
+    lines = err.strip().splitlines()
+    assert (
+        len(lines) == 1
+        and "whiskerid fleet check: interrupted (SIGTERM) as it exited" in (lines[0])
+    ), err

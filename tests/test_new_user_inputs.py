@@ -26,6 +26,9 @@ def tree(tmp_path):
     write_csv(tmp_path / "b.csv", rec)
     (tmp_path / "data" / "brick").mkdir(parents=True)
     write_csv(tmp_path / "data" / "brick" / "r1.csv", rec)
+    acc = np.sin(2 * np.pi * 20 * t)
+    acc[7] = 1e300  # a corrupt sample, finite but absurd
+    write_csv(tmp_path / "base.csv", Recording(t, {"acc": acc}))
     return tmp_path
 
 
@@ -60,6 +63,8 @@ BAD = [
     ("dataset synth --out {d}/syn --runs 0", ["--runs", "0"]),
     ("fleet simulate {d}/fleet --rate 1e6", ["--rate", "1e+06"]),
     ("fleet simulate {d}/fleet --damaged 5 --whiskers 3", ["--damaged", "5"]),
+    ("simulate --excitation base --base {d}/base.csv --out {d}/s.csv",
+     ["--base", "base.csv", "sample 7", "1e+300", "plausible", "m/s^2"]),
 ]  # fmt: skip
 
 
@@ -142,3 +147,50 @@ def test_fleet_check_refuses_a_session_given_twice_and_bytes_that_are_not_text(t
     assert main(["fleet", "check", str(fleet), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "health.csv" in err and "UTF-8" in err and "Traceback" not in err
+
+
+def test_calibrate_writes_neither_out_nor_plot_when_the_plot_fails(tree, capsys, monkeypatch):
+    """A full disk while the figure is written leaves no --out behind (all or nothing)."""
+    import errno
+
+    from matplotlib.figure import Figure
+
+    def full_disk(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(Figure, "savefig", full_disk)
+    argv = [*CAL.format(d=tree).split(), "--plot", str(tree / "o.png"), "--quiet"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert "o.png" in err and "No space left" in err and "Traceback" not in err, err
+    assert not (tree / "o.toml").exists() and not (tree / "o.png").exists()
+    assert not [p.name for p in tree.iterdir() if p.name.startswith(".")]
+    monkeypatch.undo()
+    monkeypatch.chdir(Path(__file__).resolve().parent.parent)
+    assert main(argv) == 0
+    assert (tree / "o.toml").exists() and (tree / "o.png").read_bytes()[:4] == b"\x89PNG"
+
+
+@pytest.mark.parametrize("value", ["nan", "", "-46.0"])
+def test_fleet_check_refuses_a_usable_row_without_a_positive_value(tmp_path, capsys, value):
+    """A failed drive logs NaN beside its failure (flagged ``fit``); NaN, a blank or a
+    negative value beside ``ok`` is a damaged file, refused naming file, line and column."""
+    from whiskerid.fleet import write_table
+
+    fleet = tmp_path / "FLEET"
+    fleet.mkdir()
+    rows = [{"whisker": "w0", "session": f"2026-11-2{i}", "f1_hz": "46.0", "zeta": "0.04",
+             "status": "ok"} for i in range(4)]  # fmt: skip
+    write_table(fleet / "fleet.csv", rows)
+    failed = {**rows[3], "session": "2026-11-29", "f1_hz": "nan", "zeta": "nan",
+              "status": "too short"}  # fmt: skip
+    write_table(fleet / "health.csv", [*rows, failed])
+    argv = ["fleet", "check", str(fleet), "--no-plots", "--quiet", "--json"]
+    assert main(argv) == 0
+    flags = json.loads(capsys.readouterr().out)["flags"]
+    assert [(f["session"], f["parameter"]) for f in flags] == [("2026-11-29", "fit")]
+    write_table(fleet / "health.csv", [*rows[:2], {**rows[2], "zeta": value}, rows[3]])
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "Traceback" not in err, err
+    assert "health.csv: line 4, column 6 (zeta)" in err and repr(value) in err, err

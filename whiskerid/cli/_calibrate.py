@@ -1,6 +1,7 @@
 """``whiskerid calibrate``: fit a whisker's κ (f_1), ζ and EI or C to recordings."""
 
 import argparse
+import contextlib
 import math
 from pathlib import Path
 
@@ -197,6 +198,7 @@ def _cmd_calibrate(args, command_error, parser) -> dict:
     import sys
 
     from ..fit import calibrate, read_static_test
+    from ..io import atomic_path
     from ..model import load_record
 
     inputs = {"REC": args.recordings, "--whisker": args.whisker, "--static": args.static}
@@ -240,14 +242,20 @@ def _cmd_calibrate(args, command_error, parser) -> dict:
         free_modes=args.free_modes,
     )
     progress_step("writing")
-    _with_options(cal.record, args, parser).save(args.out)
+    # All or nothing: the figure is rendered to a temporary file next to --plot before the
+    # record is written, and put in place only after it, so a full disk while plotting
+    # leaves neither (it used to leave --out written and the command refused).
+    with contextlib.ExitStack() as stack:
+        if args.plot:
+            from ..plot import plot_added_mass, plot_calibration
+
+            plot_tmp = stack.enter_context(atomic_path(args.plot))
+            (plot_calibration if masses is None else plot_added_mass)(plot_tmp, cal)
+        _with_options(cal.record, args, parser).save(args.out)
     print(cal.report(), file=sys.stderr)
     print(f"wrote {args.out}", file=sys.stderr)
     out = {**cal.to_json(), "out": str(args.out)}
     if args.plot:
-        from ..plot import plot_added_mass, plot_calibration
-
-        (plot_calibration if masses is None else plot_added_mass)(args.plot, cal)
         out["plot"] = str(args.plot)
         print(f"wrote {args.plot}", file=sys.stderr)
     if cal.status != "ok":

@@ -283,7 +283,10 @@ class InterruptPolicy:
 
     With ``keep`` (the command line's own process), the handlers stay after the command has
     stopped on a signal, until the process exits: a later signal then ends the process at
-    once with the same status (128 + the first signal), never by the default action.
+    once with the same status (128 + the first signal), never by the default action. They
+    stay after a command that ended normally too: a signal in the interpreter's teardown
+    (its last half second, JAX's and XLA's exit) ends the process at once with 128 + the
+    signal and one line (:attr:`command` names it), its outputs complete.
     """
 
     def __init__(self, *, keep: bool = False) -> None:
@@ -292,6 +295,8 @@ class InterruptPolicy:
         self.stopping = False  # set once the command has caught its interrupt
         self.keep = keep
         self.exit_status: int | None = None  # once the command has stopped on a signal
+        self.finished = False  # the command ended normally; the process is exiting
+        self.command = ""  # the command as typed, for the line said in the teardown
         self._defer = False
         self._previous: dict = {}
         self._hook = None
@@ -315,6 +320,9 @@ class InterruptPolicy:
         if self.keep and (self.stopping or self.signum is not None):
             self.stopping = True  # the handlers stay, until the process exits
             return
+        if self.keep and exc[0] is None:
+            self.finished = True  # the handlers stay: the teardown is this command's too
+            return
         for sig, handler in self._previous.items():
             signal.signal(sig, handler)
         self._previous = {}
@@ -322,6 +330,17 @@ class InterruptPolicy:
             sys.unraisablehook, self._hook = self._hook, None
 
     def _handle(self, signum, frame) -> None:
+        if self.finished and not self.stopping:
+            # The command ended and the process is exiting: raised here, the interrupt would
+            # be a traceback from an exit handler (or the default action's -15).
+            self.stopping = True
+            self.signum = signum
+            self.exit_status = 128 + int(signum)
+            try:
+                line = self.report(Interrupted(signum)).replace(")", ") as it exited", 1)
+                print(f"whiskerid {self.command}: {line}", file=sys.stderr)
+            finally:
+                exit_now(self.exit_status)
         if self.stopping:
             # The command has stopped: it is saying what it kept and tearing down. A signal
             # raised there would land in native code being torn down (a crash): the process

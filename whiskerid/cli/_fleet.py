@@ -382,12 +382,13 @@ def _cmd_check(args) -> dict:
     out = args.out or args.fleet / "check"
     check_outputs({"--out": out}, {"FLEET table": table, "FLEET health log": args.fleet /
                   HEALTH_NAME}, force=True, folders=("--out",))  # fmt: skip
-    from ..fleet import FleetError, check_fleet, read_table
+    from ..fleet import FleetError, check_fleet, read_table, refuse_corrupt_values
 
     rows = []
     for path, source in ((table, None), (args.fleet / HEALTH_NAME, "drive")):
         try:
             got = read_table(path)
+            refuse_corrupt_values(path, got)
         except FleetError as err:
             raise CommandError(str(err)) from None
         except UnicodeDecodeError as err:

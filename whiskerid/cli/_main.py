@@ -156,6 +156,7 @@ def _run(args, start: float, *, fast_exit: bool) -> int:
         f"whiskerid {name}", show=show_progress(args) and name not in _OWN_PROGRESS
     )
     with start_command(keep=fast_exit) as policy:
+        policy.command = name
         try:
             with ticker:
                 result = args.func(args)

@@ -7,6 +7,9 @@ from pathlib import Path
 from .._choices import EXCITATIONS, MODELS, OBSERVABLES, UNITS
 from ._common import FORCE_HELP, CommandError, HelpFormatter, check_outputs, record_or_paper, say
 
+# The largest base acceleration --base may hold (m/s^2, about 1000 g).
+MAX_BASE_ACC_M_S2 = 1e4
+
 
 def add_parser(sub) -> None:
     """Register ``simulate`` on the CLI's subparsers."""
@@ -289,12 +292,24 @@ def _written(args, sim, title: str, *, per_channel: bool = False) -> dict:
 
 
 def _read_base_motion(path: Path, column: str | None):
+    import numpy as np
+
     from ..io import check_samples, read_recording, recording_rate
     from ..model import BaseMotion
 
     rec = read_recording(path)
     acc = rec.signal(column)
     check_samples(rec.t, acc, where=str(path))
+    # A finite but absurd sample (a corrupt 1e300) would integrate into a base displacement of
+    # 1e293 m and be written as if measured; ~1000 g covers any shaker, vehicle or impact.
+    big = np.flatnonzero(np.abs(acc) > MAX_BASE_ACC_M_S2)
+    if big.size:
+        name = column or "the first signal column"
+        raise CommandError(
+            f"--base {path}: column {name}, sample {big[0]} (t = {float(rec.t[big[0]])!r} s) "
+            f"is {float(acc[big[0]])!r} m/s^2; a plausible base acceleration is within "
+            f"±{MAX_BASE_ACC_M_S2:g} m/s^2 (about 1000 g)"
+        )
     recording_rate(rec)  # rate_hz metadata, if any, must agree with the timestamps
     return BaseMotion(t=rec.t, acc=acc)
 

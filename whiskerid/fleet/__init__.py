@@ -23,6 +23,7 @@ from ._calibrate import session_key as session_key
 from ._check import FleetCheck as FleetCheck
 from ._check import WhiskerHistory as WhiskerHistory
 from ._check import check_fleet as check_fleet
+from ._check import refuse_corrupt_values as refuse_corrupt_values
 from ._driving import BLOCK_S as BLOCK_S
 from ._driving import MIN_BLOCKS as MIN_BLOCKS
 from ._driving import SEGMENT_S as SEGMENT_S

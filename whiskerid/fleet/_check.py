@@ -47,6 +47,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._calibrate import USABLE
+from ._table import COLUMNS, FleetError
 
 #: Parameters checked: table column → per-pluck column.
 PARAMETERS = {"f1_hz": "f1_plucks", "zeta": "zeta_plucks"}
@@ -155,6 +156,31 @@ def _row_status(row) -> str:
         if not (math.isfinite(v) and v > 0):
             return f"bad value: {p} = {row.get(p)!r}"
     return status
+
+
+def refuse_corrupt_values(path, rows: list[dict]) -> None:
+    """Refuse a table (as read by :func:`whiskerid.fleet.read_table`) in which a row whose
+    status says its fit is usable holds an f1 or a ζ that is not a positive number.
+
+    A failed fit or drive legitimately logs NaN with a status that is not usable (and
+    :func:`check_fleet` flags it); NaN, a blank or a negative value beside ``ok`` is a file
+    edited or damaged, which would otherwise be flagged as a failed fit and hide the cause.
+
+    Raises:
+        FleetError: Naming the file, the line and the column.
+    """
+    for line, row in enumerate(rows, start=2):
+        if str(row.get("status") or "").strip() not in USABLE:
+            continue
+        for p in PARAMETERS:
+            v = _float(row.get(p))
+            if not (math.isfinite(v) and v > 0):
+                raise FleetError(
+                    f"{path}: line {line}, column {COLUMNS.index(p) + 1} ({p}) is "
+                    f"{row.get(p)!r} beside status {row.get('status')!r}; a usable fit has a "
+                    "positive number there: the file was edited or damaged (restore it, or "
+                    "fit the session again)"
+                )
 
 
 def check_fleet(
