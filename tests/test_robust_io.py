@@ -268,7 +268,7 @@ def test_speed_tags_keep_the_default_names_and_never_collide():
         (["--terrains", "flat", "flat"], "flat given more than once"),
         (["--speeds", "0.2001", "0.2004"], "same to 1 mm/s"),
         (["--speeds", "nan"], "not a number"),
-        (["--duration", "nan"], "at least 2 s"),
+        (["--duration", "nan"], "from 2 to 3600 s"),
         (["--duration", "0.5"], "at least 2 s"),
     ],
 )
