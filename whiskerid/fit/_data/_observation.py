@@ -12,11 +12,13 @@ from ...io import (
     Recording,
     RecordingError,
     check_samples,
+    read_csv_table,
     read_recording,
     recording_rate,
     timestamp_rate,
 )
 from ...model import WhiskerRecord
+from .._numerics import compile_cache
 from ._noise_floor import quiet_stretch
 from ._release import find_decays, steady_line
 
@@ -136,8 +138,6 @@ class StaticTest:
 
 def read_static_test(path: str | Path) -> StaticTest:
     """Read a static test CSV with columns ``force_n`` and ``deflection_m`` (optional ``x_m``)."""
-    from ...io import read_csv_table
-
     path = Path(path)
     if not path.exists():
         raise RecordingError(f"{path}: no such static-test file")
@@ -331,8 +331,6 @@ def observations_from_file(
         RecordingError: A file that cannot be read, or sampled at odds with the whisker.
         CalibrationError: As :func:`observations_from_recording`.
     """
-    from .._numerics import compile_cache  # (JAX: the record's f_1 is computed eagerly)
-
     rec = read_recording(path, time_col=time_col)
     with compile_cache():  # its small programs from the cache, as the command line's
         check_sampling(rec, record)
