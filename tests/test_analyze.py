@@ -137,4 +137,4 @@ def test_cli_analyze_refuses_bad_settings(tmp_path, capsys):
     root = tmp_path / "ds"
     _dataset(root, np.random.default_rng(5))
     assert main(["analyze", str(root), "--per-rev", "-3"]) == 2
-    assert "--per-rev -3: give a positive number" in capsys.readouterr().err
+    assert "--per-rev -3: give a number from 0.001 to 10000" in capsys.readouterr().err
