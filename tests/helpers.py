@@ -218,8 +218,9 @@ def decay_recording(t, modes, offsets=None):
 
 def one_step_chain(path):
     """An HDF5 chain of 4 walkers in 2 dimensions, grown for two steps, with one step saved
-    through the sampler's checked backend: ``(backend, state)``, ready for a second
-    ``save_step`` that a full disk or a file-size limit must stop."""
+    (and checkpointed to ``path``) through the sampler's checked backend:
+    ``(backend, state)``, ready for a second step whose checkpoint a full disk or a
+    file-size limit must stop."""
     import emcee
 
     from whiskerid.posterior import _sample

@@ -118,8 +118,8 @@ def test_a_second_signal_never_reaches_a_command_that_is_stopping():
 
 def test_the_chain_stops_whole_before_the_disk_is_full(tmp_path, monkeypatch):
     """HDF5 crashed the process when a step's write failed on a full disk (the chain left
-    torn): a step is not begun short of CHAIN_FREE_BYTES, and what was written stays
-    readable for --resume."""
+    torn): the chain is held in memory and a checkpoint is refused short of
+    CHAIN_FREE_BYTES beyond its size, the last one on disk staying readable for --resume."""
     import emcee
 
     from whiskerid.posterior import _sample
@@ -127,8 +127,9 @@ def test_the_chain_stops_whole_before_the_disk_is_full(tmp_path, monkeypatch):
     path = tmp_path / "chain.h5"
     be, state = one_step_chain(path)
     monkeypatch.setattr(_sample, "CHAIN_FREE_BYTES", 1 << 62)  # no disk has that much
-    with pytest.raises(OSError, match="stopped before writing step 2") as err:
-        be.save_step(state, np.ones(4, bool))
+    be.save_step(state, np.ones(4, bool))  # in memory: the first step was saved just now
+    with pytest.raises(OSError, match="on its disk, too little to save") as err:
+        be.checkpoint()
     assert err.value.errno == errno.ENOSPC
     again = emcee.backends.HDFBackend(str(path), name="whiskerid", read_only=True)
     assert again.iteration == 1 and again.get_chain().shape == (1, 4, 2)

@@ -1,10 +1,12 @@
 """``whiskerid posterior``: emcee posteriors of ζ, f_1, κ (EI or C) from recordings."""
 
+import io
 import math
 import sys
 from pathlib import Path
 
 from .._choices import LIKELIHOODS, MOVES, PINS
+from ..io import WriteError, atomic_path
 from ._added_mass import added_masses
 from ._calibrate import DATA_OPTIONS, add_data_options, check_data_options, load_observations
 from ._common import (
@@ -186,7 +188,13 @@ def _cmd_posterior(args, command_error, parser) -> dict:
             )
     except OSError as err:
         _drop_empty_chain(chain, args.resume)
-        raise command_error(f"could not write the chain {chain}: {one_line(err)}") from None
+        kept = _chain_note(chain) or f"{chain} was not kept"
+        why = (
+            one_line(err)
+            if isinstance(err, WriteError)
+            else f"could not write {chain}: {one_line(err)}"
+        )
+        raise command_error(f"{why}; {kept}") from None
     except BaseException:
         # Refused (bad settings for this record) or stopped before any step: a chain with
         # no samples would only block the corrected run ("already exists").
@@ -318,11 +326,14 @@ def _store_settings(chain: Path, settings: dict, command_error) -> None:
         import h5py
     except ImportError:
         raise command_error("posterior's chain file needs h5py (pip install h5py)") from None
+    image = io.BytesIO()  # HDF5 never writes to the disk itself (run_sampler says why)
     try:
-        with h5py.File(chain, "a") as f:
+        with h5py.File(image, "w") as f:
             f.attrs[_SETTINGS_KEY] = json.dumps(settings, sort_keys=True)
-    except OSError as err:
-        raise command_error(f"could not write the chain {chain}: {one_line(err)}") from None
+        with atomic_path(chain) as tmp:
+            tmp.write_bytes(image.getvalue())
+    except OSError as err:  # a WriteError, naming the chain
+        raise command_error(one_line(err)) from None
 
 
 def _check_same_run(chain: Path, settings: dict, command_error) -> None:

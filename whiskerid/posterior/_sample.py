@@ -1,7 +1,12 @@
 """Running emcee: walkers from the Laplace approximation, moves, HDF5 backend and resume."""
 
 import errno
+import io
+import math
+import os
 import shutil
+import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -133,48 +138,108 @@ def run_sampler(
         p0 = initial_walkers(prob, walkers, np.random.default_rng(seed))
         state = emcee.State(p0, random_state=np.random.RandomState(seed).get_state())
     sampler.whiskerid_move = move  # for the provenance (summarize)
-    for _ in sampler.sample(state, iterations=steps, progress=progress):
-        if stop is not None and stop():
-            raise KeyboardInterrupt
+    try:
+        for _ in sampler.sample(state, iterations=steps, progress=progress):
+            if stop is not None and stop():
+                raise KeyboardInterrupt
+    finally:
+        if be is not None:
+            be.checkpoint()  # every finished step, also when stopped or refused
     return sampler
 
 
-#: Free space a chain file's disk must keep before each step is written. HDF5 cannot survive
-#: a write that fails for want of space (it crashed the process, leaving the chain at a
-#: torn step), so a step is never begun short of it: the run stops with the chain whole.
-CHAIN_FREE_BYTES = 8 << 20
+#: Free space a chain file's disk must keep before a checkpoint is written (a refusal
+#: that names the disk rather than a failed write).
+CHAIN_FREE_BYTES = 1 << 20
+
+#: Seconds between checkpoints of the chain file (and one at the end of every run, stopped,
+#: interrupted or not): what a killed process can lose at most.
+CHECKPOINT_S = 2.0
 
 
 def _checked_backend(emcee):
-    """emcee's HDF5 backend, checking the free space before it writes anything."""
+    """emcee's HDF5 backend, with HDF5 kept off the disk.
+
+    HDF5 cannot survive a write that fails for want of space: a full disk (or ``ulimit -f``)
+    under an open chain file crashed the process (SIGSEGV in h5py's "Can't decrement id ref
+    count"), at any write, so a free-space check before each write could only narrow the
+    race. Here the file lives in memory (an HDF5 image in a :class:`io.BytesIO`, loaded
+    from the file when there is one) and reaches the disk only as a whole file written by
+    plain Python to a temporary name and renamed over the old one (:func:`checkpoint`): a
+    full disk then fails as an ordinary :class:`OSError`, and the file on disk is always
+    the last whole checkpoint, which ``--resume`` continues. Same format as emcee's.
+    """
 
     class CheckedHDFBackend(emcee.backends.HDFBackend):
-        def _check_space(self) -> None:
-            folder = Path(self.filename).resolve().parent
-            disk = shutil.disk_usage(folder).free
-            free = min(disk, _size_limit_room(self.filename))
-            if free < CHAIN_FREE_BYTES:
-                where = "on its disk" if free == disk else "under the file-size limit (ulimit -f)"
-                raise OSError(
-                    errno.ENOSPC if free == disk else errno.EFBIG,
-                    f"{free / 1e6:.3g} MB left {where}: stopped before writing step "
-                    f"{self.iteration + 1}, the chain whole to there; free some space and "
-                    "continue it with --resume",
-                )
+        def __init__(self, filename, *args, **kwargs):
+            super().__init__(filename, *args, **kwargs)
+            path = Path(filename)
+            self._image = io.BytesIO(path.read_bytes() if path.is_file() else b"")
+            self._saved = -math.inf  # the first step is saved at once
 
-        def grow(self, ngrow, blobs):
-            self._check_space()
-            super().grow(ngrow, blobs)
+        @property
+        def initialized(self):
+            return self._image.getbuffer().nbytes > 0 and super().initialized
+
+        def open(self, mode="r"):
+            import h5py
+
+            if self.read_only and mode != "r":
+                raise RuntimeError("the chain was opened read-only")
+            f = h5py.File(self._image, mode)
+            if not self.dtype_set and self.name in f and "chain" in f[self.name]:
+                self.dtype = f[self.name]["chain"].dtype
+                self.dtype_set = True
+            return f
+
+        def checkpoint(self) -> None:
+            """Write the chain file whole (atomically); on a full disk the old one stays."""
+            _check_space(self.filename, self._image.getbuffer().nbytes)
+            write_image(self.filename, self._image.getvalue())
+            self._saved = time.monotonic()
 
         def save_step(self, state, accepted):
-            self._check_space()
             super().save_step(state, accepted)
+            if time.monotonic() - self._saved >= CHECKPOINT_S:
+                self.checkpoint()
 
     return CheckedHDFBackend
 
 
+def write_image(path: str | Path, data: bytes) -> None:
+    """Write an HDF5 file image over ``path`` atomically (no HDF5 call touches the disk):
+    a temporary file beside it, synced, renamed over it; on a failure it is removed and
+    ``path`` is left as it was."""
+    path = Path(path)
+    fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        if path.exists():  # keep the old file's permissions
+            shutil.copymode(path, name)
+        os.replace(name, path)
+    except BaseException:
+        Path(name).unlink(missing_ok=True)
+        raise
+
+
+def _check_space(filename: str | Path, size: int) -> None:
+    """Refuse a checkpoint of ``size`` bytes short of :data:`CHAIN_FREE_BYTES` beyond it."""
+    folder = Path(filename).resolve().parent
+    disk = shutil.disk_usage(folder).free
+    free = min(disk, _size_limit_room(filename))
+    if free < size + CHAIN_FREE_BYTES:
+        where = "on its disk" if free == disk else "under the file-size limit (ulimit -f)"
+        raise OSError(
+            errno.ENOSPC if free == disk else errno.EFBIG,
+            f"{free / 1e6:.3g} MB left {where}, too little to save {size / 1e6:.3g} MB",
+        )
+
+
 def _size_limit_room(path) -> float:
-    """Bytes the file at ``path`` may still grow by under the process's file-size limit
+    """Bytes a new file next to ``path`` may hold under the process's file-size limit
     (``ulimit -f``; a write beyond it fails as a full disk's does): infinite without one."""
     try:
         import resource
@@ -184,8 +249,7 @@ def _size_limit_room(path) -> float:
         return float("inf")
     if limit == resource.RLIM_INFINITY:
         return float("inf")
-    size = Path(path).stat().st_size if Path(path).exists() else 0
-    return float(limit - size)
+    return float(limit)  # the file is written whole, from size 0
 
 
 def sample_posterior(
