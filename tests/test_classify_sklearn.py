@@ -38,6 +38,7 @@ def test_fit_predict_score_on_features():
     assert np.array_equal(again.predict_proba(X[120:]), p)
 
 
+@pytest.mark.slow
 def test_windows_mode_in_a_grouped_pipeline():
     """Windows of samples at rate_hz: the project's features, then the network; in a
     Pipeline scored by recording (GroupKFold)."""

@@ -100,6 +100,7 @@ def test_a_health_log_that_is_not_utf8_is_named(tmp_path, record, capsys):
     assert code == 2 and "health.csv" in err and "UTF-8" in err
 
 
+@pytest.mark.slow
 def test_white_noise_is_logged_as_no_resonance(tmp_path, record, capsys):
     rng = np.random.default_rng(3)
     signals = [(f"w{k}", np.round(3000 * rng.standard_normal(N))) for k in range(8)]
@@ -107,6 +108,7 @@ def test_white_noise_is_logged_as_no_resonance(tmp_path, record, capsys):
     assert code == 0 and out["status"] != "ok" and out["problem"]
 
 
+@pytest.mark.slow
 def test_a_whisker_far_from_its_record_is_not_read_at_the_bands_edge(tmp_path, record, capsys):
     """A 59.97 Hz whisker started from the 46 Hz record: its peak lies beyond 1.25 f1."""
     signals = drive(np.random.default_rng(4), 59.97, 0.04, minutes=8)
@@ -114,12 +116,14 @@ def test_a_whisker_far_from_its_record_is_not_read_at_the_bands_edge(tmp_path, r
     assert code == 0 and out["status"] != "ok"
 
 
+@pytest.mark.slow
 def test_identical_blocks_never_give_a_zero_sigma():
     (one,) = drive(np.random.default_rng(5), 46.0, 0.04, minutes=1)
     fit = identify_driving([(f"s{k}", one[1]) for k in range(6)], RATE, 46.0, 0.04)
     assert fit.status == "identical blocks"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("f1", "zeta"), [(25.0, 0.06), (46.0, 0.03), (70.0, 0.02)])
 def test_a_real_resonance_still_reads_ok(f1, zeta):
     """The checks above leave a healthy drive alone (independent generator, 5 minutes)."""

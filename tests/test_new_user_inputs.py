@@ -149,6 +149,7 @@ def test_fleet_check_refuses_a_session_given_twice_and_bytes_that_are_not_text(t
     assert "health.csv" in err and "UTF-8" in err and "Traceback" not in err
 
 
+@pytest.mark.slow
 def test_calibrate_writes_neither_out_nor_plot_when_the_plot_fails(tree, capsys, monkeypatch):
     """A full disk while the figure is written leaves no --out behind (all or nothing)."""
     import errno

@@ -26,6 +26,7 @@ def decay_csv(path, seed=3):
     return path
 
 
+@pytest.mark.slow
 def test_netcdf_with_chains_opens_in_arviz(tmp_path, capsys):
     from whiskerid.cli._main import main
 

@@ -8,6 +8,7 @@ import errno
 import json
 
 import h5py
+import pytest
 from test_posterior import decay
 
 import whiskerid as wi
@@ -15,6 +16,7 @@ from whiskerid.cli._main import main
 from whiskerid.posterior import _sample
 
 
+@pytest.mark.slow
 def test_a_full_disk_mid_run_keeps_the_last_checkpoint_for_resume(tmp_path, capsys, monkeypatch):
     o = decay(5)
     csv = tmp_path / "decay.csv"
