@@ -41,9 +41,11 @@ from ._data import read_static_test as read_static_test
 from ._data import release_time as release_time
 from ._data import resample_uniform as resample_uniform
 from ._data import steady_line as steady_line
+from ._linear import LIMITABLE as LIMITABLE
 from ._linear import MODULUS_TOLERANCE as MODULUS_TOLERANCE
 from ._linear import ZETA_MAX as ZETA_MAX
 from ._linear import FitProblem as FitProblem
+from ._linear import Parameters as Parameters
 from ._linear import RecordingModel as RecordingModel
 from ._linear import StaticTestModel as StaticTestModel
 from ._linear import WindowFits as WindowFits
