@@ -80,6 +80,22 @@ def add_calibrate(sub, command_error) -> None:
         "Free decays only, --modes 2 or more",
     )
     p.add_argument(
+        "--fix",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="hold a reported quantity at a value (f1_hz or zeta; repeatable), e.g. "
+        "--fix zeta=0.03: its 1-sigma is reported as 0 (linear model only)",
+    )
+    p.add_argument(
+        "--bounds",
+        action="append",
+        default=[],
+        metavar="NAME=LO:HI",
+        help="keep a reported quantity inside (LO, HI) (f1_hz or zeta; repeatable), e.g. "
+        "--bounds f1_hz=40:50: a value that ends at a bound has its 1-sigma refused (null)",
+    )
+    p.add_argument(
         "--plot",
         type=Path,
         help="save data, fit and residuals as this PNG (with added masses: the decays without "
@@ -194,6 +210,41 @@ def load_observations(path: Path, record, args) -> list:
     )
 
 
+def parse_limits(fix: list[str], bounds: list[str], command_error):
+    """``--fix NAME=VALUE`` and ``--bounds NAME=LO:HI`` as a :class:`whiskerid.fit.Parameters`
+    (None when neither is given); a malformed one is refused naming the flag and value."""
+    from ..fit import CalibrationError, Parameters
+
+    if not fix and not bounds:
+        return None
+    out = Parameters()
+    seen: set[str] = set()
+    try:
+        for flag, items in (("--fix", fix), ("--bounds", bounds)):
+            for item in items:
+                name, sep, value = item.partition("=")
+                name = name.strip()
+                if not sep or not name or not value:
+                    shape = "NAME=VALUE" if flag == "--fix" else "NAME=LO:HI"
+                    raise command_error(
+                        f"{flag} {item!r}: give {shape}, e.g. "
+                        + ("zeta=0.03" if flag == "--fix" else "f1_hz=40:50")
+                    )
+                if name in seen:
+                    raise command_error(f"{flag} {item!r}: {name} is fixed or bounded twice")
+                seen.add(name)
+                if flag == "--fix":
+                    out = out.fix(name, value)
+                    continue
+                lo, colon, hi = value.partition(":")
+                if not colon:
+                    raise command_error(f"--bounds {item!r}: give NAME=LO:HI, e.g. f1_hz=40:50")
+                out = out.bound(name, lo, hi)
+    except CalibrationError as e:
+        raise command_error(str(e)) from None
+    return out
+
+
 def _cmd_calibrate(args, command_error, parser) -> dict:
     import sys
 
@@ -215,8 +266,16 @@ def _cmd_calibrate(args, command_error, parser) -> dict:
         raise command_error(f"--f1-start {args.f1_start:g}: give a frequency from 0.01 to 10000 Hz")
     if args.free_modes:
         _check_free_modes(args, command_error)
+    parameters = parse_limits(args.fix, args.bounds, command_error)
+    if parameters is not None and (args.model != "linear" or args.added_mass):
+        raise command_error(
+            "--fix/--bounds apply to the linear fit of one whisker: leave out --model and "
+            "--added-mass"
+        )
     record = load_record(args.whisker)
     columns = _plane_columns(args.signal_col, command_error)
+    if columns is not None and parameters is not None:
+        raise command_error("--fix/--bounds: give one --signal-col, not two planes")
     if columns is not None:
         return _calibrate_planes(args, parser, record, columns, command_error)
     progress_step("reading the recordings, finding the releases")
@@ -240,6 +299,7 @@ def _cmd_calibrate(args, command_error, parser) -> dict:
         modulus_tolerance=args.modulus_tolerance,
         model=args.model,
         free_modes=args.free_modes,
+        parameters=parameters,
     )
     progress_step("writing")
     # All or nothing: the figure is rendered to a temporary file next to --plot before the

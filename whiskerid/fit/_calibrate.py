@@ -287,7 +287,11 @@ def _apply_limits(cal: Calibration, parameters: Parameters) -> None:
                     cal.params[k]["source"] = f"at the {side} bound of {name}"
         summary[names[param]] = entry
     cal.diagnostics["parameters"] = summary
-    cal.record.extra.setdefault("fit", {})["parameters"] = summary
+    fit = cal.record.extra["fit"]
+    fit["parameters"] = summary
+    for k, v in cal.params.items():  # TOML has no null: a refused 1σ is left out
+        fit["params"][k] = {kk: vv for kk, vv in v.items() if vv is not None}
+    fit["warnings"] = list(cal.warnings)
 
 
 def _user_order(parameters: Parameters, limits) -> list[tuple[str, float, float]]:

@@ -55,7 +55,7 @@ class Parameters:
         lo, hi = _number(name, lo, "bounds"), _number(name, hi, "bounds")
         if not lo < hi:
             raise CalibrationError(
-                f"bounds of {name}: the lower {lo:g} must be below the upper {hi:g}"
+                f"--bounds {name}: the lower {lo:g} must be below the upper {hi:g}"
             )
         _check_range(name, lo, hi, "bounds")
         return self._with(name, lo, hi)
