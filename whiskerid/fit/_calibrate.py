@@ -270,10 +270,12 @@ def _apply_limits(cal: Calibration, parameters: Parameters) -> None:
         value = cal.params[name]["value"]
         follows = [k for k in cal.params if k.startswith(_FROM_ZETA) == (param == "zeta_u")]
         if lo == hi:
+            # its Jacobian column is zero: what follows from it alone already has 1σ 0 (ρa
+            # under pin material keeps its modulus' share)
             entry = {"fixed": ulo, "value": value}
-            for k in follows:
-                cal.params[k]["std"] = 0.0
-                cal.params[k]["source"] = f"fixed by the user ({name} = {ulo:g})"
+            p = cal.params[name]
+            p.update({s: 0.0 for s in ("std", "std_white") if s in p})
+            p["source"] = f"fixed by the user ({name} = {ulo:g})"
         else:
             entry = {"bounds": [ulo, uhi], "value": value, "at_bound": hit[param]}
             if hit[param]:
@@ -283,14 +285,16 @@ def _apply_limits(cal: Calibration, parameters: Parameters) -> None:
                 entry["std_refused"] = reason
                 cal.warnings.append(reason)
                 for k in follows:
-                    cal.params[k]["std"] = None
+                    cal.params[k].update(
+                        {s: None for s in ("std", "std_white") if s in cal.params[k]}
+                    )
                     cal.params[k]["source"] = f"at the {side} bound of {name}"
         summary[names[param]] = entry
     cal.diagnostics["parameters"] = summary
     fit = cal.record.extra["fit"]
     fit["parameters"] = summary
     for k, v in cal.params.items():  # TOML has no null: a refused 1σ is left out
-        fit["params"][k] = {kk: vv for kk, vv in v.items() if vv is not None}
+        fit["params"][k] = {kk: v[kk] for kk in ("value", "std", "source") if v[kk] is not None}
     fit["warnings"] = list(cal.warnings)
 
 
