@@ -168,17 +168,17 @@ def calibrate(
     _check_linear(obs, pin, n_modes, f1_start_hz)
     pin = "geometry" if pin == "auto" else pin
     nominal = nominal_whisker(record, n_modes)
-    limits = ()
+    limits, limit_values = (), None
     if parameters is not None and parameters.limits:
         if model != "linear":
             raise CalibrationError("--fix/--bounds apply to the linear model: leave out --model")
         f1_nom = float(np.asarray(nominal.natural_frequencies_hz)[0])
         kappa = float(nominal.EI) / float(nominal.rho_a)
         scale = None if static is not None else f1_nom / float(np.sqrt(kappa))
-        limits = problem_limits(parameters, f1_per_sqrt_kappa=scale)
+        limits, limit_values = problem_limits(parameters, f1_per_sqrt_kappa=scale)
     problem = FitProblem.from_observations(
         record, obs, static=static, n_modes=n_modes, zeta_per_mode=zeta_per_mode, pin=pin,
-        nominal=nominal, limits=limits,
+        nominal=nominal, limits=limits, limit_values=limit_values,
     )  # fmt: skip
     # One compiled program (module _linear._program): the start grid over (κ, ζ) with the linear
     # coefficients solved exactly, the solve, each block (recording, static test) weighted by
@@ -265,11 +265,11 @@ def _apply_limits(cal: Calibration, parameters: Parameters) -> None:
     hit = at_bound(limits, cal.optimum)
     names = {"log_kappa": "f1_hz", "zeta_u": "zeta"}
     summary = {}
-    for (param, lo, hi), (name, ulo, uhi) in zip(limits, _user_order(parameters, limits),
+    for (param, fixed), (name, ulo, uhi) in zip(limits, _user_order(parameters, limits),
                                                   strict=True):  # fmt: skip
         value = cal.params[name]["value"]
         follows = [k for k in cal.params if k.startswith(_FROM_ZETA) == (param == "zeta_u")]
-        if lo == hi:
+        if fixed:
             # its Jacobian column is zero: what follows from it alone already has 1σ 0 (ρa
             # under pin material keeps its modulus' share)
             entry = {"fixed": ulo, "value": value}
@@ -302,7 +302,7 @@ def _user_order(parameters: Parameters, limits) -> list[tuple[str, float, float]
     """The user's ``(name, lo, hi)`` in the order of the problem's sorted limits."""
     param_of = {"f1_hz": "log_kappa", "zeta": "zeta_u"}
     user = {param_of[n]: (n, lo, hi) for n, lo, hi in parameters.limits}
-    return [user[p] for p, _, _ in limits]
+    return [user[p] for p, _ in limits]
 
 
 def _check_model(model: str, obs, static, free_modes: bool, n_modes: int, added_mass) -> None:

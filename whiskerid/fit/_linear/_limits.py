@@ -8,8 +8,11 @@ static test). A fixed quantity is the limit ``lo = hi``: the model reads the val
 the parameter, so the parameter's Jacobian column is zero, it leaves the fit and its
 variance (the pseudo-inverse of ``JᵀJ``) is exactly 0.
 
-The problem carries its limits as a static field (:attr:`FitProblem.limits`): a fit with
-limits compiles its own program, and the default fit (no limits) traces exactly as before.
+The problem carries which parameters are limited, and how, as a static field
+(:attr:`FitProblem.limits`) and the limits themselves as a traced leaf
+(:attr:`FitProblem.limit_values`): a fit with limits compiles one program per kind of limits
+(not per value: a profile over fixed values reuses it), and the default fit (no limits)
+traces exactly as before.
 """
 
 import math
@@ -96,12 +99,15 @@ def _check_range(name: str, lo: float, hi: float, flag: str) -> None:
         )
 
 
-def problem_limits(parameters: Parameters | None, *, f1_per_sqrt_kappa: float | None) -> tuple:
-    """The static limits of a :class:`FitProblem`: ``(param, lo, hi)`` in the fitted
-    parameters' own scale (``log κ``, ζ); ``f1_per_sqrt_kappa`` is ``f_1/√κ`` of the
-    problem (None when a static test makes it depend on the fit: f_1 cannot be limited)."""
-    if parameters is None:
-        return ()
+def problem_limits(
+    parameters: Parameters | None, *, f1_per_sqrt_kappa: float | None
+) -> tuple[tuple, np.ndarray | None]:
+    """The limits of a :class:`FitProblem`: the static ``(param, fixed)`` per limited
+    parameter (sorted), and their ``(lo, hi)`` rows in the fitted parameters' own scale
+    (``log κ``, ζ); ``f1_per_sqrt_kappa`` is ``f_1/√κ`` of the problem (None when a static
+    test makes it depend on the fit: f_1 cannot be limited). ``((), None)`` for none."""
+    if parameters is None or not parameters.limits:
+        return (), None
     out = []
     for name, lo, hi in parameters.limits:
         if name == "f1_hz":
@@ -111,31 +117,34 @@ def problem_limits(parameters: Parameters | None, *, f1_per_sqrt_kappa: float | 
                     "EI; limit zeta only, or leave the static test out"
                 )
             lo, hi = (2.0 * math.log(f / f1_per_sqrt_kappa) for f in (lo, hi))
-        out.append((LIMITABLE[name], lo, hi))
-    return tuple(sorted(out))
+        out.append((LIMITABLE[name], lo == hi, lo, hi))
+    out.sort()
+    return tuple((n, f) for n, f, _, _ in out), np.array([[lo, hi] for *_, lo, hi in out])
 
 
-def limited(limits: tuple, key: str, u, default):
+def limited(limits: tuple, values, key: str, u, default):
     """A parameter through its limit (fixed value, or logistic on the interval), or
     ``default(u)`` when it has none."""
-    for name, lo, hi in limits:
+    for i, (name, fixed) in enumerate(limits):
         if name == key:
-            if lo == hi:
+            lo, hi = values[i, 0], values[i, 1]
+            if fixed:
                 return lo + 0.0 * u  # a zero Jacobian column: the parameter leaves the fit
             return lsq.to_interval(u, lo, hi)
     return default(u)
 
 
-def free_start(limits: tuple, theta: dict, zeta_max: float) -> dict:
+def free_start(limits: tuple, values, theta: dict, zeta_max: float) -> dict:
     """Start parameters (unlimited meaning: ``log κ``, logistic ζ on (0, zeta_max)) in the
     limited parametrisation: each moved inside its interval and mapped back through it."""
     theta = dict(theta)
-    for name, lo, hi in limits:
+    for i, (name, fixed) in enumerate(limits):
+        lo, hi = values[i, 0], values[i, 1]
         if name == "log_kappa":
             x = theta["log_kappa"]
         else:
             x = lsq.to_interval(theta["zeta_u"], 0.0, zeta_max)
-        if lo == hi:
+        if fixed:
             u = jnp.zeros_like(x)
         else:
             margin = 0.01 * (hi - lo)
@@ -148,8 +157,8 @@ def at_bound(limits: tuple, optimum: dict) -> dict[str, bool]:
     """Per bounded parameter (``log_kappa``, ``zeta_u``), whether the optimum sits at a
     bound (its logistic fraction within :data:`AT_BOUND` of 0 or 1)."""
     out = {}
-    for name, lo, hi in limits:
-        if lo == hi:
+    for name, fixed in limits:
+        if fixed:
             continue
         u = float(np.clip(np.ravel(np.asarray(optimum[name]))[0], -700.0, 700.0))
         p = 1.0 / (1.0 + math.exp(-u))

@@ -126,9 +126,10 @@ class FitProblem(eqx.Module):
         zeta_per_mode: One ζ per mode instead of one for all.
         pin: ``geometry`` or ``material`` (what fixes EI or C without a static test).
         kind: ``coil`` or ``beam``.
-        limits: What the user fixed or bounded, ``(param, lo, hi)`` in the fitted
-            parameters' scale (``log_kappa``, ``zeta_u`` for ζ itself; module ``_limits``);
-            empty for the plain fit.
+        limits: What the user fixed or bounded, ``(param, fixed)`` per parameter
+            (``log_kappa``, ``zeta_u``; module ``_limits``); empty for the plain fit.
+        limit_values: Their ``(lo, hi)`` rows in the fitted scale (``log κ``, ζ itself), or
+            None.
     """
 
     recordings: tuple[RecordingModel, ...]
@@ -145,6 +146,7 @@ class FitProblem(eqx.Module):
     pin: str = eqx.field(static=True)
     kind: str = eqx.field(static=True)
     limits: tuple = eqx.field(static=True, default=(), kw_only=True)
+    limit_values: Array | None = eqx.field(default=None, kw_only=True)
 
     @classmethod
     def from_observations(
@@ -158,10 +160,12 @@ class FitProblem(eqx.Module):
         pin: str = "geometry",
         nominal: Whisker | None = None,
         limits: tuple = (),
+        limit_values: np.ndarray | None = None,
     ) -> "FitProblem":
         """The problem of fitting ``record``'s whisker to recordings (and a static test);
         ``nominal`` is ``record.whisker().with_modes(n_modes)`` if the caller has it;
-        ``limits`` are the user's fixed values and bounds (module ``_limits``)."""
+        ``limits`` and ``limit_values`` are the user's fixed values and bounds (module
+        ``_limits``)."""
         if pin not in PINS or pin == "auto":
             raise CalibrationError(f"pin must be geometry or material, not {pin!r}")
         if nominal is None:
@@ -195,6 +199,7 @@ class FitProblem(eqx.Module):
             pin=pin,
             kind="coil" if coil else "beam",
             limits=tuple(limits),
+            limit_values=None if limit_values is None else np.asarray(limit_values, float),
         )
 
     @property
@@ -233,9 +238,10 @@ class FitProblem(eqx.Module):
     def whisker(self, params) -> Whisker:
         """The whisker at parameters ``params`` (sensor position 0: each recording has its own)."""
         if self.limits:  # the user's fixed values and bounds (module _limits)
-            kappa = jnp.exp(limited(self.limits, "log_kappa", params["log_kappa"], lambda u: u))
+            lims, values = self.limits, self.limit_values
+            kappa = jnp.exp(limited(lims, values, "log_kappa", params["log_kappa"], lambda u: u))
             rho_a = jnp.exp(params["log_EI"]) / kappa if self.fit_ei else self.rho_a
-            zeta = limited(self.limits, "zeta_u", params["zeta_u"],
+            zeta = limited(lims, values, "zeta_u", params["zeta_u"],
                            lambda u: lsq.to_interval(u, 0.0, ZETA_MAX))  # fmt: skip
         else:
             kappa = jnp.exp(params["log_kappa"])

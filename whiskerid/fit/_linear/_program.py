@@ -366,7 +366,9 @@ def fit_core(problem: FitProblem, masks, first: dict, *, solver: str, max_steps:
                                 coefficients=solver != "levenberg-marquardt")  # fmt: skip
         flat0 = problem.flatten(theta)
     if problem.limits:  # the start (grid or given) moved inside the user's limits
-        flat0 = problem.flatten(free_start(problem.limits, problem.unflatten(flat0), ZETA_MAX))
+        theta = free_start(problem.limits, problem.limit_values, problem.unflatten(flat0),
+                           ZETA_MAX)  # fmt: skip
+        flat0 = problem.flatten(theta)
     mask = _mask_vector(problem, masks)
     # One block (a recording, no static test): its weight is one factor on every residual,
     # which moves neither the optimum nor s²(JᵀJ)⁻¹, so one solve; more blocks are solved
