@@ -77,4 +77,5 @@ from ._numerics import gradient_cosine as gradient_cosine
 from ._numerics import least_squares as least_squares
 from ._numerics import sincos as sincos
 from ._numerics import to_interval as to_interval
+from ._profile import profile_interval as profile_interval
 from ._result import fit_report as fit_report
