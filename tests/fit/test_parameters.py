@@ -131,3 +131,45 @@ def test_limits_are_refused_with_the_nonlinear_model(pluck):
     obs = observations_from_file(pluck, record)
     with pytest.raises(CalibrationError, match="linear model"):
         wi.calibrate(record, obs, model="nonlinear", parameters=Parameters().fix("zeta", 0.03))
+
+
+def test_the_profile_interval_matches_the_1sigma_on_a_clean_pluck(pluck):
+    record = wi.load_record(PAPER)
+    obs = observations_from_file(pluck, record)
+    prof = wi.fit.profile_interval(record, obs, "zeta", points=11, span=3.0)
+    v, s = prof["value"], prof["std"]
+    assert prof["lower"] < v < prof["upper"]
+    # nearly linear in ζ here: each half-width within 15 % of the covariance's 1σ
+    for half in (v - prof["lower"], prof["upper"] - v):
+        assert half == pytest.approx(s, rel=0.15)
+    assert min(prof["delta_chi2"]) == pytest.approx(0.0, abs=1e-6)
+    assert max(prof["delta_chi2"]) > 4  # ± 3σ reaches well past Δχ² = 1
+
+
+@pytest.mark.slow
+def test_cli_profile_writes_json_and_a_figure(pluck, tmp_path, capsys):
+    png = tmp_path / "profile.png"
+    argv = ["calibrate", str(pluck), "--whisker", PAPER, "--out", str(tmp_path / "c.toml"),
+            "--json", "--profile", "f1_hz", "--profile-plot", str(png)]  # fmt: skip
+    assert main(argv) == 0
+    js = json.loads(capsys.readouterr().out)
+    prof = js["profile"]
+    assert prof["name"] == "f1_hz" and prof["lower"] < prof["value"] < prof["upper"]
+    assert png.read_bytes()[:4] == b"\x89PNG" and js["profile_plot"] == str(png)
+
+
+@pytest.mark.parametrize(
+    ("flags", "needle"),
+    [
+        (["--profile", "EI"], "--profile 'EI': give one of f1_hz, zeta"),
+        (["--profile-plot", "p.png"], "--profile-plot p.png: give --profile NAME too"),
+        (["--profile", "zeta", "--fix", "f1_hz=46"], "--profile zeta: profiles the plain"),
+    ],
+)
+def test_bad_profile_flags_exit_2(flags, needle, tmp_path, capsys):
+    rec = tmp_path / "rec.csv"
+    rec.write_text("t,deflection\n0,0\n")
+    argv = ["calibrate", str(rec), "--whisker", PAPER, "--out", str(tmp_path / "o.toml"), *flags]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert needle in err and len(err.strip().splitlines()) == 1
