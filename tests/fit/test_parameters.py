@@ -173,3 +173,11 @@ def test_bad_profile_flags_exit_2(flags, needle, tmp_path, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert needle in err and len(err.strip().splitlines()) == 1
+
+
+def test_limits_are_refused_with_added_masses(pluck):
+    record = wi.load_record(PAPER)
+    obs = observations_from_file(pluck, record)
+    with pytest.raises(CalibrationError, match="without added masses"):
+        wi.calibrate(record, obs, added_mass=[None] * len(obs),
+                     parameters=Parameters().fix("zeta", 0.03))  # fmt: skip

@@ -158,6 +158,8 @@ def calibrate(
         raise CalibrationError("no recordings to calibrate")
     modulus_tolerance = check_tolerance(modulus_tolerance)
     _check_model(model, obs, static, free_modes, n_modes, added_mass)
+    if added_mass is not None and parameters is not None and parameters.limits:
+        raise CalibrationError("--fix/--bounds apply to the linear fit without added masses")
     if added_mass is not None:
         if static is not None:
             raise CalibrationError("give a static test or added masses, not both")
