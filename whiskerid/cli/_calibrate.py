@@ -80,6 +80,33 @@ def add_calibrate(sub, command_error) -> None:
         "Free decays only, --modes 2 or more",
     )
     p.add_argument(
+        "--fix",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="hold a reported quantity at a value (f1_hz or zeta; repeatable), e.g. "
+        "--fix zeta=0.03: its 1-sigma is reported as 0 (linear model only)",
+    )
+    p.add_argument(
+        "--bounds",
+        action="append",
+        default=[],
+        metavar="NAME=LO:HI",
+        help="keep a reported quantity inside (LO, HI) (f1_hz or zeta; repeatable), e.g. "
+        "--bounds f1_hz=40:50: a value that ends at a bound has its 1-sigma refused (null)",
+    )
+    p.add_argument(
+        "--profile",
+        metavar="NAME",
+        help="also a profile-likelihood interval of f1_hz or zeta: refit with it fixed on 21 "
+        "values within 4 sigma, the interval where delta chi^2 = 1 ('profile' in --json)",
+    )
+    p.add_argument(
+        "--profile-plot",
+        type=Path,
+        help="with --profile: save delta chi^2 against the value, beside the 1-sigma, as this PNG",
+    )
+    p.add_argument(
         "--plot",
         type=Path,
         help="save data, fit and residuals as this PNG (with added masses: the decays without "
@@ -194,6 +221,58 @@ def load_observations(path: Path, record, args) -> list:
     )
 
 
+def _check_profile(args, parameters, command_error) -> None:
+    """Refuse a ``--profile`` (and ``--profile-plot``) that cannot be drawn."""
+    from ..fit import LIMITABLE
+
+    if args.profile_plot is not None and args.profile is None:
+        raise command_error(f"--profile-plot {args.profile_plot}: give --profile NAME too")
+    if args.profile is None:
+        return
+    if args.profile not in LIMITABLE:
+        raise command_error(f"--profile {args.profile!r}: give one of {', '.join(LIMITABLE)}")
+    if parameters is not None or args.model != "linear" or args.added_mass:
+        raise command_error(
+            f"--profile {args.profile}: profiles the plain linear fit; leave out --fix, "
+            "--bounds, --model and --added-mass"
+        )
+
+
+def parse_limits(fix: list[str], bounds: list[str], command_error):
+    """``--fix NAME=VALUE`` and ``--bounds NAME=LO:HI`` as a :class:`whiskerid.fit.Parameters`
+    (None when neither is given); a malformed one is refused naming the flag and value."""
+    from ..fit import CalibrationError, Parameters
+
+    if not fix and not bounds:
+        return None
+    out = Parameters()
+    seen: set[str] = set()
+    try:
+        for flag, items in (("--fix", fix), ("--bounds", bounds)):
+            for item in items:
+                name, sep, value = item.partition("=")
+                name = name.strip()
+                if not sep or not name or not value:
+                    shape = "NAME=VALUE" if flag == "--fix" else "NAME=LO:HI"
+                    raise command_error(
+                        f"{flag} {item!r}: give {shape}, e.g. "
+                        + ("zeta=0.03" if flag == "--fix" else "f1_hz=40:50")
+                    )
+                if name in seen:
+                    raise command_error(f"{flag} {item!r}: {name} is fixed or bounded twice")
+                seen.add(name)
+                if flag == "--fix":
+                    out = out.fix(name, value)
+                    continue
+                lo, colon, hi = value.partition(":")
+                if not colon:
+                    raise command_error(f"--bounds {item!r}: give NAME=LO:HI, e.g. f1_hz=40:50")
+                out = out.bound(name, lo, hi)
+    except CalibrationError as e:
+        raise command_error(str(e)) from None
+    return out
+
+
 def _cmd_calibrate(args, command_error, parser) -> dict:
     import sys
 
@@ -202,7 +281,8 @@ def _cmd_calibrate(args, command_error, parser) -> dict:
     from ..model import load_record
 
     inputs = {"REC": args.recordings, "--whisker": args.whisker, "--static": args.static}
-    check_outputs({"--out": args.out, "--plot": args.plot}, inputs, force=args.force)
+    outputs = {"--out": args.out, "--plot": args.plot, "--profile-plot": args.profile_plot}
+    check_outputs(outputs, inputs, force=args.force)
     check_data_options(args)
     if not (math.isfinite(args.modulus_tolerance) and 0 <= args.modulus_tolerance < 1):
         raise command_error(
@@ -215,8 +295,17 @@ def _cmd_calibrate(args, command_error, parser) -> dict:
         raise command_error(f"--f1-start {args.f1_start:g}: give a frequency from 0.01 to 10000 Hz")
     if args.free_modes:
         _check_free_modes(args, command_error)
+    parameters = parse_limits(args.fix, args.bounds, command_error)
+    _check_profile(args, parameters, command_error)
+    if parameters is not None and (args.model != "linear" or args.added_mass):
+        raise command_error(
+            "--fix/--bounds apply to the linear fit of one whisker: leave out --model and "
+            "--added-mass"
+        )
     record = load_record(args.whisker)
     columns = _plane_columns(args.signal_col, command_error)
+    if columns is not None and parameters is not None:
+        raise command_error("--fix/--bounds: give one --signal-col, not two planes")
     if columns is not None:
         return _calibrate_planes(args, parser, record, columns, command_error)
     progress_step("reading the recordings, finding the releases")
@@ -240,7 +329,18 @@ def _cmd_calibrate(args, command_error, parser) -> dict:
         modulus_tolerance=args.modulus_tolerance,
         model=args.model,
         free_modes=args.free_modes,
+        parameters=parameters,
     )
+    profile = None
+    if args.profile:
+        from ..fit import profile_interval
+
+        progress_step(f"profiling {args.profile} (21 refits)")
+        profile = profile_interval(
+            record, obs, args.profile, static=static, n_modes=args.modes,
+            zeta_per_mode=args.zeta_per_mode, pin=args.pin, solver=args.solver,
+            f1_start_hz=args.f1_start, modulus_tolerance=args.modulus_tolerance,
+        )  # fmt: skip
     progress_step("writing")
     # All or nothing: the figure is rendered to a temporary file next to --plot before the
     # record is written, and put in place only after it, so a full disk while plotting
@@ -255,6 +355,19 @@ def _cmd_calibrate(args, command_error, parser) -> dict:
     print(cal.report(), file=sys.stderr)
     print(f"wrote {args.out}", file=sys.stderr)
     out = {**cal.to_json(), "out": str(args.out)}
+    if profile is not None:
+        out["profile"] = profile
+        print(
+            f"profile of {profile['name']}: Δχ² = 1 at {profile['lower']} and "
+            f"{profile['upper']} (1σ ±{profile['std']:.3g} around {profile['value']:.6g})",
+            file=sys.stderr,
+        )
+        if args.profile_plot:
+            from ..plot import plot_profile
+
+            plot_profile(args.profile_plot, profile)
+            out["profile_plot"] = str(args.profile_plot)
+            print(f"wrote {args.profile_plot}", file=sys.stderr)
     if args.plot:
         out["plot"] = str(args.plot)
         print(f"wrote {args.plot}", file=sys.stderr)

@@ -41,9 +41,11 @@ from ._data import read_static_test as read_static_test
 from ._data import release_time as release_time
 from ._data import resample_uniform as resample_uniform
 from ._data import steady_line as steady_line
+from ._linear import LIMITABLE as LIMITABLE
 from ._linear import MODULUS_TOLERANCE as MODULUS_TOLERANCE
 from ._linear import ZETA_MAX as ZETA_MAX
 from ._linear import FitProblem as FitProblem
+from ._linear import Parameters as Parameters
 from ._linear import RecordingModel as RecordingModel
 from ._linear import StaticTestModel as StaticTestModel
 from ._linear import WindowFits as WindowFits
@@ -75,4 +77,5 @@ from ._numerics import gradient_cosine as gradient_cosine
 from ._numerics import least_squares as least_squares
 from ._numerics import sincos as sincos
 from ._numerics import to_interval as to_interval
+from ._profile import profile_interval as profile_interval
 from ._result import fit_report as fit_report

@@ -56,10 +56,13 @@ from ._linear import GTOL as GTOL
 from ._linear import (
     MODULUS_TOLERANCE,
     FitProblem,
+    Parameters,
+    at_bound,
     check_tolerance,
     fit_problem,
     modulus_covariance,
     nominal_whisker,
+    problem_limits,
     reported_names,
     solve_status,
 )
@@ -102,6 +105,7 @@ def calibrate(
     model: str = "linear",
     nl_terms: tuple[str, ...] | None = None,
     free_modes: bool = False,
+    parameters: Parameters | None = None,
 ) -> Calibration:
     """Fit κ (f_1), ζ and the nuisances to one or more recordings (and a static test).
 
@@ -140,6 +144,11 @@ def calibrate(
             ``zeta_2``, …): for a higher mode the beam puts in the wrong place, seen as a
             residual line near it. Needs ``model`` nonlinear or auto, ``n_modes ≥ 2`` and
             free decays (:func:`whiskerid.fit.calibrate_nonlinear`).
+        parameters: Reported quantities held fixed or kept within bounds
+            (:class:`whiskerid.fit.Parameters`: ``f1_hz``, ``zeta``; linear model only). A
+            fixed one is reported with 1σ 0, one that ends at a bound with its 1σ refused
+            (None, the reason in ``diagnostics["parameters"]``); the amplitude test is then
+            not run (its steps assume the unlimited parameters).
 
     Returns:
         A :class:`Calibration`; never raises on a failed solve (see ``status``).
@@ -149,6 +158,8 @@ def calibrate(
         raise CalibrationError("no recordings to calibrate")
     modulus_tolerance = check_tolerance(modulus_tolerance)
     _check_model(model, obs, static, free_modes, n_modes, added_mass)
+    if added_mass is not None and parameters is not None and parameters.limits:
+        raise CalibrationError("--fix/--bounds apply to the linear fit without added masses")
     if added_mass is not None:
         if static is not None:
             raise CalibrationError("give a static test or added masses, not both")
@@ -159,9 +170,17 @@ def calibrate(
     _check_linear(obs, pin, n_modes, f1_start_hz)
     pin = "geometry" if pin == "auto" else pin
     nominal = nominal_whisker(record, n_modes)
+    limits, limit_values = (), None
+    if parameters is not None and parameters.limits:
+        if model != "linear":
+            raise CalibrationError("--fix/--bounds apply to the linear model: leave out --model")
+        f1_nom = float(np.asarray(nominal.natural_frequencies_hz)[0])
+        kappa = float(nominal.EI) / float(nominal.rho_a)
+        scale = None if static is not None else f1_nom / float(np.sqrt(kappa))
+        limits, limit_values = problem_limits(parameters, f1_per_sqrt_kappa=scale)
     problem = FitProblem.from_observations(
         record, obs, static=static, n_modes=n_modes, zeta_per_mode=zeta_per_mode, pin=pin,
-        nominal=nominal,
+        nominal=nominal, limits=limits, limit_values=limit_values,
     )  # fmt: skip
     # One compiled program (module _linear._program): the start grid over (κ, ζ) with the linear
     # coefficients solved exactly, the solve, each block (recording, static test) weighted by
@@ -229,9 +248,63 @@ def calibrate(
         covariance=cov,
     )
     out.record = record_with_fit(record, out, pin, static, obs, problem)
+    if problem.limits:  # the amplitude test's steps assume the unlimited parameters
+        _apply_limits(out, parameters)
+        return out
     # amplitude dependence and the choice of model
     return choose_model(out, obs, model, nl_terms, resid=resid_w, jac=jac, core=res.amplitude,
                   free_modes=free_modes)  # fmt: skip
+
+
+#: Reported quantities that follow from κ (f_1's parameter) or from ζ.
+_FROM_ZETA = "zeta"
+
+
+def _apply_limits(cal: Calibration, parameters: Parameters) -> None:
+    """Mark what the user fixed or bounded: a fixed quantity (and what follows from it) has
+    1σ 0, one at a bound has its 1σ refused (None), as lmfit refuses it."""
+    limits = cal.problem.limits
+    hit = at_bound(limits, cal.optimum)
+    names = {"log_kappa": "f1_hz", "zeta_u": "zeta"}
+    summary = {}
+    for (param, fixed), (name, ulo, uhi) in zip(limits, _user_order(parameters, limits),
+                                                  strict=True):  # fmt: skip
+        value = cal.params[name]["value"]
+        follows = [k for k in cal.params if k.startswith(_FROM_ZETA) == (param == "zeta_u")]
+        if fixed:
+            # its Jacobian column is zero: what follows from it alone already has 1σ 0 (ρa
+            # under pin material keeps its modulus' share)
+            entry = {"fixed": ulo, "value": value}
+            p = cal.params[name]
+            p.update({s: 0.0 for s in ("std", "std_white") if s in p})
+            p["source"] = f"fixed by the user ({name} = {ulo:g})"
+        else:
+            entry = {"bounds": [ulo, uhi], "value": value, "at_bound": hit[param]}
+            if hit[param]:
+                side = "lower" if abs(value - ulo) <= abs(value - uhi) else "upper"
+                reason = (f"{name} is at its {side} bound {ulo if side == 'lower' else uhi:g}: "
+                          "its 1σ is refused (the data pull it outside the bounds)")  # fmt: skip
+                entry["std_refused"] = reason
+                cal.warnings.append(reason)
+                for k in follows:
+                    cal.params[k].update(
+                        {s: None for s in ("std", "std_white") if s in cal.params[k]}
+                    )
+                    cal.params[k]["source"] = f"at the {side} bound of {name}"
+        summary[names[param]] = entry
+    cal.diagnostics["parameters"] = summary
+    fit = cal.record.extra["fit"]
+    fit["parameters"] = summary
+    for k, v in cal.params.items():  # TOML has no null: a refused 1σ is left out
+        fit["params"][k] = {kk: v[kk] for kk in ("value", "std", "source") if v[kk] is not None}
+    fit["warnings"] = list(cal.warnings)
+
+
+def _user_order(parameters: Parameters, limits) -> list[tuple[str, float, float]]:
+    """The user's ``(name, lo, hi)`` in the order of the problem's sorted limits."""
+    param_of = {"f1_hz": "log_kappa", "zeta": "zeta_u"}
+    user = {param_of[n]: (n, lo, hi) for n, lo, hi in parameters.limits}
+    return [user[p] for p, _ in limits]
 
 
 def _check_model(model: str, obs, static, free_modes: bool, n_modes: int, added_mass) -> None:

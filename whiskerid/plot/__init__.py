@@ -16,4 +16,5 @@ from ._plot import real_peaks as real_peaks
 from ._posterior import plot_corner as plot_corner
 from ._posterior import plot_predictive as plot_predictive
 from ._posterior import plot_trace as plot_trace
+from ._profile import plot_profile as plot_profile
 from ._sidebands import plot_sidebands as plot_sidebands

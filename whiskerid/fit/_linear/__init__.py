@@ -6,6 +6,10 @@ from ._decay import conversion_average as conversion_average
 from ._decay import decay_rates as decay_rates
 from ._decay import free_decay_columns as free_decay_columns
 from ._host_whisker import nominal_whisker as nominal_whisker
+from ._limits import LIMITABLE as LIMITABLE
+from ._limits import Parameters as Parameters
+from ._limits import at_bound as at_bound
+from ._limits import problem_limits as problem_limits
 from ._modulus import MODULUS_TOLERANCE as MODULUS_TOLERANCE
 from ._modulus import check_tolerance as check_tolerance
 from ._modulus import modulus_covariance as modulus_covariance

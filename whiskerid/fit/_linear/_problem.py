@@ -43,6 +43,7 @@ from ...model._modes import host_roots
 from .._data import CalibrationError, Observation, StaticTest, nominal_gain
 from .._numerics import lsq, sincos
 from ._decay import decay_rates, free_decay_columns
+from ._limits import limited
 
 ZETA_MAX = 0.95
 
@@ -125,6 +126,10 @@ class FitProblem(eqx.Module):
         zeta_per_mode: One ζ per mode instead of one for all.
         pin: ``geometry`` or ``material`` (what fixes EI or C without a static test).
         kind: ``coil`` or ``beam``.
+        limits: What the user fixed or bounded, ``(param, fixed)`` per parameter
+            (``log_kappa``, ``zeta_u``; module ``_limits``); empty for the plain fit.
+        limit_values: Their ``(lo, hi)`` rows in the fitted scale (``log κ``, ζ itself), or
+            None.
     """
 
     recordings: tuple[RecordingModel, ...]
@@ -140,6 +145,8 @@ class FitProblem(eqx.Module):
     zeta_per_mode: bool = eqx.field(static=True)
     pin: str = eqx.field(static=True)
     kind: str = eqx.field(static=True)
+    limits: tuple = eqx.field(static=True, default=(), kw_only=True)
+    limit_values: Array | None = eqx.field(default=None, kw_only=True)
 
     @classmethod
     def from_observations(
@@ -152,9 +159,13 @@ class FitProblem(eqx.Module):
         zeta_per_mode: bool = False,
         pin: str = "geometry",
         nominal: Whisker | None = None,
+        limits: tuple = (),
+        limit_values: np.ndarray | None = None,
     ) -> "FitProblem":
         """The problem of fitting ``record``'s whisker to recordings (and a static test);
-        ``nominal`` is ``record.whisker().with_modes(n_modes)`` if the caller has it."""
+        ``nominal`` is ``record.whisker().with_modes(n_modes)`` if the caller has it;
+        ``limits`` and ``limit_values`` are the user's fixed values and bounds (module
+        ``_limits``)."""
         if pin not in PINS or pin == "auto":
             raise CalibrationError(f"pin must be geometry or material, not {pin!r}")
         if nominal is None:
@@ -187,6 +198,8 @@ class FitProblem(eqx.Module):
             zeta_per_mode=bool(zeta_per_mode),
             pin=pin,
             kind="coil" if coil else "beam",
+            limits=tuple(limits),
+            limit_values=None if limit_values is None else np.asarray(limit_values, float),
         )
 
     @property
@@ -224,9 +237,16 @@ class FitProblem(eqx.Module):
     # ------------------------------------------------------------------ model
     def whisker(self, params) -> Whisker:
         """The whisker at parameters ``params`` (sensor position 0: each recording has its own)."""
-        kappa = jnp.exp(params["log_kappa"])
-        rho_a = jnp.exp(params["log_EI"]) / kappa if self.fit_ei else self.rho_a
-        zeta = lsq.to_interval(params["zeta_u"], 0.0, ZETA_MAX)
+        if self.limits:  # the user's fixed values and bounds (module _limits)
+            lims, values = self.limits, self.limit_values
+            kappa = jnp.exp(limited(lims, values, "log_kappa", params["log_kappa"], lambda u: u))
+            rho_a = jnp.exp(params["log_EI"]) / kappa if self.fit_ei else self.rho_a
+            zeta = limited(lims, values, "zeta_u", params["zeta_u"],
+                           lambda u: lsq.to_interval(u, 0.0, ZETA_MAX))  # fmt: skip
+        else:
+            kappa = jnp.exp(params["log_kappa"])
+            rho_a = jnp.exp(params["log_EI"]) / kappa if self.fit_ei else self.rho_a
+            zeta = lsq.to_interval(params["zeta_u"], 0.0, ZETA_MAX)
         zeta = jnp.broadcast_to(zeta, (self.n_modes,))
         fields = dict(
             length_m=self.length_m,

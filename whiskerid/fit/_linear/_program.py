@@ -31,7 +31,8 @@ import numpy as np
 from ...model import mode_shape
 from .._numerics import cached_call, lsq
 from . import _varpro as _varpro
-from ._problem import FitProblem, recording_design
+from ._limits import free_start
+from ._problem import ZETA_MAX, FitProblem, recording_design
 from ._start import start_from_grid, start_grid
 
 _BUCKET_STEPS = (1.0, 1.25, 1.5, 1.75)
@@ -132,7 +133,9 @@ def fit_problem(
     sizes = [r.t.shape[0] for r in problem.recordings]
     padded, masks = padded_problem(problem)
     if start is None:
-        first = start_grid(problem, observations, nominal, f1_hz=f1_start_hz)
+        # the grid searches the unlimited parameters (fit_core maps its best point inside)
+        unlimited = replaced(problem, limits=()) if problem.limits else problem
+        first = start_grid(unlimited, observations, nominal, f1_hz=f1_start_hz)
     else:
         first = {"flat0": np.asarray(problem.flatten(start))}
     fn = functools.partial(fit_core, solver=solver, max_steps=max_steps)
@@ -358,8 +361,13 @@ def fit_core(problem: FitProblem, masks, first: dict, *, solver: str, max_steps:
         flat0 = first["flat0"]
     else:
         # variable projection (the default solver) solves the linear coefficients itself
-        theta = start_from_grid(problem, first, masks,
+        unlimited = replaced(problem, limits=()) if problem.limits else problem
+        theta = start_from_grid(unlimited, first, masks,
                                 coefficients=solver != "levenberg-marquardt")  # fmt: skip
+        flat0 = problem.flatten(theta)
+    if problem.limits:  # the start (grid or given) moved inside the user's limits
+        theta = free_start(problem.limits, problem.limit_values, problem.unflatten(flat0),
+                           ZETA_MAX)  # fmt: skip
         flat0 = problem.flatten(theta)
     mask = _mask_vector(problem, masks)
     # One block (a recording, no static test): its weight is one factor on every residual,

@@ -60,6 +60,10 @@ def fit_report(cal, *, min_correlation: float = MIN_CORRELATION) -> str:
 
 def _value(p: dict) -> str:
     v, s = p["value"], p["std"]
+    if s is None:  # at a bound the user set: refused, as lmfit refuses it
+        return f"{v:.6g} ± (refused: {p['source']})"
+    if s == 0 and p["source"].startswith("fixed"):
+        return f"{v:.6g} (fixed)"
     if not np.isfinite(s):
         return f"{v:.6g} ± ?"
     digits = max(2, int(np.ceil(-np.log10(s / abs(v)))) + 2) if s > 0 and v != 0 else 6
