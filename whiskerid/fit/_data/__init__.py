@@ -16,8 +16,8 @@ from ._observation import read_static_test as read_static_test
 from ._observation import release_time as release_time
 from ._release import Decay as Decay
 from ._release import find_decays as find_decays
-from ._release import quantum as quantum
 from ._release import steady_line as steady_line
+from ._ringing import quantum as quantum
 from ._signal import Peak as Peak
 from ._signal import amplitude_spectrum as amplitude_spectrum
 from ._signal import dominant_peaks as dominant_peaks
