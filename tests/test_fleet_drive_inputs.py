@@ -28,6 +28,13 @@ def _f1():
     return float(paper_record().whisker().natural_frequencies_hz[0])
 
 
+@pytest.fixture(scope="module")
+def four_minutes():
+    """A good 4-minute drive, made once (SciPy's simulation takes seconds): the tests of bad
+    flags and files around it only read it."""
+    return drive(np.random.default_rng(1), _f1(), 0.04, minutes=4)
+
+
 def _run(tmp_path, signals, record, capsys, *extra):
     folder = tmp_path / "drive"
     folder.mkdir(exist_ok=True)
@@ -39,31 +46,31 @@ def _run(tmp_path, signals, record, capsys, *extra):
     return code, (json.loads(out.out) if code == 0 else None), out.err, paths
 
 
-def _constant(rng):
+def _constant(rng, four_minutes):
     return [(f"c{k}", np.full(N, 123.0)) for k in range(8)]
 
 
-def _rail(rng):
+def _rail(rng, four_minutes):
     return [(f"r{k}", np.full(N, 32767.0)) for k in range(8)]
 
 
-def _rail_noisy(rng):
+def _rail_noisy(rng, four_minutes):
     return [(f"r{k}", np.minimum(32767, 32767 + np.round(3000 * rng.standard_normal(N))))
             for k in range(8)]  # fmt: skip
 
 
-def _same(rng):
+def _same(rng, four_minutes):
     (one,) = drive(rng, _f1(), 0.04, minutes=1)
     return [(f"s{k}", one[1]) for k in range(8)]
 
 
-def _nan(rng):
-    signals = drive(rng, _f1(), 0.04, minutes=4)
+def _nan(rng, four_minutes):
+    signals = [(name, y.copy()) for name, y in four_minutes]
     signals[2][1][100] = np.nan
     return signals
 
 
-def _short(rng):
+def _short(rng, four_minutes):
     return drive(rng, _f1(), 0.04, minutes=1, seconds=180)
 
 
@@ -78,25 +85,25 @@ def _short(rng):
         (_short, "needs at least 4 blocks, 240 s of driving"),
     ],
 )
-def test_a_recording_that_is_no_driving_response_exits_2_naming_it(tmp_path, record, capsys,
-                                                                   make, needle):  # fmt: skip
-    code, _, err, _ = _run(tmp_path, make(np.random.default_rng(0)), record, capsys)
+def test_a_recording_that_is_no_driving_response_exits_2_naming_it(
+    tmp_path, record, capsys, make, needle, four_minutes
+):
+    signals = make(np.random.default_rng(0), four_minutes)
+    code, _, err, _ = _run(tmp_path, signals, record, capsys)
     assert code == 2 and needle in err and "Traceback" not in err
     assert not (tmp_path / "fleet" / "health.csv").exists()
 
 
 @pytest.mark.parametrize("block", ["inf", "nan", "-5", "10", "1e9"])
-def test_a_bad_block_exits_2_naming_the_flag(tmp_path, record, capsys, block):
-    signals = drive(np.random.default_rng(1), _f1(), 0.04, minutes=4)
-    code, _, err, _ = _run(tmp_path, signals, record, capsys, "--block", block)
+def test_a_bad_block_exits_2_naming_the_flag(tmp_path, record, capsys, block, four_minutes):
+    code, _, err, _ = _run(tmp_path, four_minutes, record, capsys, "--block", block)
     assert code == 2 and "--block" in err and "Traceback" not in err
 
 
-def test_a_health_log_that_is_not_utf8_is_named(tmp_path, record, capsys):
+def test_a_health_log_that_is_not_utf8_is_named(tmp_path, record, capsys, four_minutes):
     (tmp_path / "fleet").mkdir()
     (tmp_path / "fleet" / "health.csv").write_bytes(b"whisker,session\n\xe9t\xe9,x\n")
-    signals = drive(np.random.default_rng(2), _f1(), 0.04, minutes=4)
-    code, _, err, _ = _run(tmp_path, signals, record, capsys)
+    code, _, err, _ = _run(tmp_path, four_minutes, record, capsys)
     assert code == 2 and "health.csv" in err and "UTF-8" in err
 
 
