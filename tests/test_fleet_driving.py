@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 import pytest
+from generators.driving import save_csv
 
 from whiskerid.cli import main
 from whiskerid.fleet import check_fleet, identify_driving, read_table
@@ -82,17 +83,6 @@ def test_noise_alone_is_no_resonance():
         assert fit.f1_std > 0.005 * fit.f1_hz or fit.zeta_std > 0.3 * fit.zeta
 
 
-def _save(folder, signals):
-    paths = []
-    for name, y in signals:
-        path = folder / f"{name}.csv"
-        t = np.arange(y.size) / RATE
-        np.savetxt(path, np.column_stack([t, y]), delimiter=",", header="t,adc", comments="",
-                   fmt="%.8g")  # fmt: skip
-        paths.append(path)
-    return paths
-
-
 @pytest.mark.slow  # four drives of ten minutes, each fitted
 def test_cli_drive_logs_sessions_and_check_flags_a_three_percent_drop(tmp_path, capsys):
     from whiskerid.model import paper_record
@@ -106,7 +96,7 @@ def test_cli_drive_logs_sessions_and_check_flags_a_three_percent_drop(tmp_path, 
         truth = f1 * (1 + 0.002 * rng.normal()) * (0.97 if s == 3 else 1.0)
         folder = tmp_path / f"drive-{s}"
         folder.mkdir()
-        paths = _save(folder, _drive(rng, truth, 0.04, minutes=10))
+        paths = save_csv(folder, _drive(rng, truth, 0.04, minutes=10))
         args = [
             "fleet",
             "drive",
